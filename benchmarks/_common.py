@@ -1,0 +1,37 @@
+"""Helpers shared by the benchmark scripts: one-core settings, timing, JSON output."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from typing import Callable
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+
+def pin_to_one_core() -> None:
+    """Pin the process to one CPU (Linux) so 'one core' figures mean one core."""
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+
+
+def median_time(fn: Callable[[], object], repeats: int = 5) -> float:
+    """Median wall time [s] of ``repeats`` calls (after one warm-up call)."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def emit(result: dict) -> None:
+    """Print the result as JSON with the machine it ran on."""
+    result["machine"] = {"python": sys.version.split()[0], "platform": platform.platform(), "cpu_count": os.cpu_count()}
+    print(json.dumps(result, indent=2))

@@ -1,0 +1,120 @@
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+from stable_baselines3.common.env_util import make_vec_env
+
+import tire_learning_env
+from tire_learning_env.params import ParameterError
+
+BASE_IDS = ["TireLearning-Cornering-v0", "TireLearning-LaneChange-v0", "TireLearning-LaneKeeping-v0"]
+
+
+@pytest.mark.parametrize("env_id", BASE_IDS)
+def test_gymnasium_env_checker(env_id):
+    check_env(gym.make(env_id).unwrapped, skip_render_check=False)
+
+
+@pytest.mark.parametrize("env_id", BASE_IDS)
+def test_sb3_env_checker(env_id):
+    with pytest.warns(UserWarning, match="symmetric and normalized"):
+        sb3_check_env(gym.make(env_id), warn=True)
+
+
+def rollout(env, seed, steps=60):
+    obs, _ = env.reset(seed=seed)
+    out = [obs]
+    for k in range(steps):
+        obs, reward, term, trunc, info = env.step(np.array([0.01 * np.sin(0.3 * k)], dtype=np.float32))
+        out.append(obs)
+        out.append(info["true_state"])
+    return np.concatenate([np.ravel(o) for o in out])
+
+
+def test_same_seed_same_rollout_different_seed_differs_with_noise():
+    camera = tire_learning_env.CameraParams.paper_noise(rate=20.0)
+    a = rollout(gym.make("TireLearning-LaneChange-v0", camera=camera), seed=7)
+    b = rollout(gym.make("TireLearning-LaneChange-v0", camera=camera), seed=7)
+    c = rollout(gym.make("TireLearning-LaneChange-v0", camera=camera), seed=8)
+    np.testing.assert_array_equal(a, b)
+    assert not np.allclose(a, c)
+
+
+def test_nan_action_raises_and_out_of_range_is_clipped():
+    env = gym.make("TireLearning-Cornering-v0")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        env.step(np.array([np.nan]))
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        env.step(np.array([np.inf]))
+    _, _, _, _, info = env.step(np.array([10.0]))
+    assert info["sensor_log"]["delta"].max() <= env.unwrapped.driver_params.max_steering + 1e-12
+    # the offset was clipped to max_steering_offset: delta - driver steering stays within it
+    assert np.all(np.isfinite(info["sensor_log"]["delta"]))
+
+
+def test_unknown_config_key_is_named():
+    with pytest.raises(ParameterError, match="frobnicate"):
+        gym.make("TireLearning-LaneKeeping-v0", config={"frobnicate": 1})
+    with pytest.raises(ParameterError, match="VehicleParams"):
+        gym.make("TireLearning-LaneKeeping-v0", config={"vehicle": {"mass": 3}})
+
+
+def test_config_chooses_the_road_and_rates():
+    env = gym.make("TireLearning-LaneKeeping-v0", config={"road": "sine", "policy_rate": 10.0, "camera": {"rate": 20.0}})
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.zeros(1))
+    log = info["sensor_log"]
+    assert len(log["t"]) == 100
+    assert np.isfinite(log["e1"]).sum() == 2  # 20 Hz frames over 0.1 s
+
+
+def test_info_carries_ground_truth():
+    env = gym.make("TireLearning-Cornering-v0")
+    env.reset(seed=0)
+    for _ in range(300):
+        _, _, _, _, info = env.step(np.zeros(1))
+    assert info["true_state"].shape == (4,)
+    for key in ("true_slip", "true_force", "true_force_nonlinear"):
+        assert info[key].shape == (2,)
+    # on the 300 m arc the Pacejka truth force is below the linear one: nonlinear part negative
+    assert np.all(info["true_force_nonlinear"] < 0)
+    assert info["truth_log"]["true_state"].shape == (50, 4)
+
+
+def test_lane_departure_terminates():
+    env = gym.make("TireLearning-LaneKeeping-v0", road="straight", action_mode="full")
+    env.reset(seed=0)
+    for _ in range(200):
+        _, _, terminated, truncated, info = env.step(np.array([0.05]))
+        if terminated:
+            break
+    assert terminated
+    assert abs(info["true_state"][0]) > env.unwrapped.departure_threshold
+
+
+def test_render_rgb_array():
+    env = gym.make("TireLearning-LaneChange-v0", render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(np.zeros(1))
+    img = env.render()
+    assert img.dtype == np.uint8 and img.shape[2] == 3
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) >= 4  # grass, asphalt, marking, car
+
+
+def test_gymnasium_vector_env():
+    envs = gym.make_vec("TireLearning-LaneChange-v0", num_envs=3, vectorization_mode="sync")
+    obs, _ = envs.reset(seed=[1, 2, 3])
+    assert obs.shape == (3, 6)
+    obs, rew, term, trunc, info = envs.step(np.zeros((3, 1), dtype=np.float32))
+    assert rew.shape == (3,)
+    assert info["true_state"].shape == (3, 4)
+
+
+def test_sb3_vec_env():
+    vec = make_vec_env("TireLearning-Cornering-v0", n_envs=2, seed=0)
+    obs = vec.reset()
+    assert obs.shape == (2, 6)
+    obs, rew, done, infos = vec.step(np.zeros((2, 1), dtype=np.float32))
+    assert len(infos) == 2 and "true_slip" in infos[0]

@@ -1,0 +1,94 @@
+import numpy as np
+import pytest
+
+from tire_learning_env.dynamics import BicyclePlant, PlantEffects
+from tire_learning_env.params import CameraParams, DriverParams, VehicleParams
+from tire_learning_env.roads import make_road
+from tire_learning_env.simulation import Simulator, simulate
+from tire_learning_env.tires import CallableTire, PacejkaTire, axle_tires
+
+
+class PythonOnlyPlant:
+    """The same plant without its compiled parameters: forces Simulator's Python loop."""
+
+    def __init__(self, plant):
+        self._p = plant
+        self.vehicle = plant.vehicle
+
+    @property
+    def state(self):
+        return self._p.state
+
+    def reset(self, xi=None):
+        self._p.reset(xi)
+
+    def step(self, *args):
+        return self._p.step(*args)
+
+
+@pytest.mark.parametrize(
+    "camera, effects",
+    [
+        (CameraParams(), PlantEffects()),
+        (
+            CameraParams(rate=30.0, latency=0.07, noise="gaussian", e1_noise=0.02, e2_noise=0.01, dropout_probability=0.2, e2_bias=0.002),
+            PlantEffects(relaxation_length=0.5, bank_angle=0.01, crosswind_force=300.0, crosswind_arm=0.3, load_transfer=1.0, steering_offset=0.002),
+        ),
+    ],
+)
+def test_compiled_and_python_loops_give_the_same_log(camera, effects):
+    v = VehicleParams()
+    logs = []
+    for wrap in (lambda p: p, PythonOnlyPlant):
+        plant = wrap(BicyclePlant(v, *axle_tires(v), effects))
+        sim = Simulator(plant, make_road("lane_changes"), camera, DriverParams())
+        sim.reset(np.random.default_rng(5))
+        chunks = [sim.advance(50, steering_offset=0.003 * k) for k in range(40)]
+        logs.append(chunks)
+    for a, b in zip(*logs):
+        for key in a.sensors:
+            np.testing.assert_allclose(a.sensors[key], b.sensors[key], rtol=1e-12, atol=1e-14, equal_nan=True)
+        for key in a.truth:
+            np.testing.assert_allclose(a.truth[key], b.truth[key], rtol=1e-12, atol=1e-14)
+
+
+def test_camera_rate_latency_and_dropouts():
+    camera = CameraParams(rate=20.0, latency=0.1, dropout_probability=0.3)
+    log = simulate("study1", 10.0, camera=camera, seed=1)
+    t, e1 = log.sensors["t"], log.sensors["e1"]
+    arrived = ~np.isnan(e1)
+    # 20 Hz frames, each delivered 0.1 s after it showed
+    frame_times = np.round(np.arange(0.0, 10.0 - 0.1 - 1e-9, 0.05) + 0.1, 6)
+    delivered = np.round(t[arrived], 6)
+    assert set(delivered) <= set(frame_times)
+    lost = 1 - len(delivered) / len(frame_times)
+    assert 0.2 < lost < 0.4
+    # a delivered frame equals the truth 0.1 s earlier (no noise configured)
+    idx = np.flatnonzero(arrived)
+    np.testing.assert_allclose(e1[idx], log.truth["true_state"][idx - 100, 0], atol=1e-12)
+
+
+def test_uniform_noise_has_the_configured_width():
+    log = simulate("straight", 20.0, camera=CameraParams.paper_noise(rate=100.0), seed=2)
+    err = log.sensors["e1"] - log.truth["true_state"][:, 0]
+    err = err[~np.isnan(err)]
+    assert np.abs(err).max() <= 0.01
+    assert np.std(err) == pytest.approx(0.01 / np.sqrt(3), rel=0.1)
+
+
+def test_custom_tire_runs_through_the_compiled_loop():
+    v = VehicleParams()
+    pac = PacejkaTire.for_axle(v, __import__("tire_learning_env").TireParams(), "front")
+    custom = CallableTire(pac.lateral_force)
+    a = simulate("study1", 20.0, tires=(pac, axle_tires(v)[1]))
+    b = simulate("study1", 20.0, tires=(custom, axle_tires(v)[1]))
+    np.testing.assert_allclose(a.truth["true_state"], b.truth["true_state"], atol=1e-6)
+
+
+def test_blow_up_raises_with_time_and_state():
+    v = VehicleParams(vx=30.0)
+    plant = BicyclePlant(v, *axle_tires(v, "linear"))
+    sim = Simulator(plant, make_road("straight"), CameraParams(), DriverParams(max_steering=0.5))
+    sim.reset(np.random.default_rng(0), xi0=[0.0, 1e308, 0.0, 1e308])
+    with pytest.raises(FloatingPointError, match=r"t=0\.0000 s"):
+        sim.advance(5)

@@ -1,0 +1,1 @@
+"""Subcommands of ``tire-learning``; each module defines ``register(subparsers)``."""

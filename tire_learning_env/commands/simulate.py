@@ -1,0 +1,83 @@
+"""``tire-learning simulate``: write a driving log from the truth vehicle."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from ..dynamics import PlantEffects
+from ..io import write_log
+from ..params import CameraParams, ParameterError, TireParams
+from ..roads import BUILTIN_ROADS
+from ..simulation import simulate
+from ._common import add_vehicle_argument, parse_assignments, vehicle_from_args
+
+#: ``--effect`` names that act on the camera rather than on the vehicle
+CAMERA_EFFECTS = {"camera_latency": "latency", "camera_heading_bias": "e2_bias", "camera_offset_bias": "e1_bias"}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help="simulate the truth vehicle with the lane-keeping driver and write a log (LOG_FORMAT.md)",
+        description="Closed-loop simulation of the truth vehicle on a road; writes the shared CSV log "
+        "with ground-truth columns (true_*).",
+    )
+    p.add_argument("--road", default="study1", choices=sorted(BUILTIN_ROADS), help="built-in road (default study1)")
+    p.add_argument("--duration", type=float, default=60.0, help="simulated time [s] (default 60)")
+    p.add_argument("--tire", choices=["pacejka", "linear"], default="pacejka", help="truth tire model")
+    p.add_argument("--mu", type=float, default=TireParams().mu, help="Pacejka friction coefficient")
+    p.add_argument("--physics-rate", type=float, default=1000.0, help="integration rate [Hz]")
+    p.add_argument("--log-rate", type=float, default=100.0, help="rate of the written rows [Hz] (frames are kept)")
+    p.add_argument("--camera-rate", type=float, default=100.0, help="camera frame rate [Hz]")
+    p.add_argument("--noise", choices=["none", "paper", "uniform", "gaussian"], default="none",
+                   help="camera noise: paper = uniform +/-1 cm, +/-1 deg")
+    p.add_argument("--e1-noise", type=float, default=0.01, help="e1 noise half-width/std [m]")
+    p.add_argument("--e2-noise", type=float, default=math.radians(0.1), help="e2 noise half-width/std [rad]")
+    p.add_argument("--effect", action="append", metavar="NAME=VALUE",
+                   help="hidden physical effect (repeatable); vehicle effects: "
+                   + ", ".join(f.name for f in PlantEffects.__dataclass_fields__.values())
+                   + "; camera effects: " + ", ".join(CAMERA_EFFECTS))
+    p.add_argument("--seed", type=int, default=0, help="noise seed")
+    p.add_argument("--no-truth", action="store_true", help="omit the true_* columns")
+    p.add_argument("--out", type=Path, required=True, help="output CSV")
+    add_vehicle_argument(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    vehicle = vehicle_from_args(args)
+    effects = parse_assignments(args.effect, "--effect")
+    camera_kwargs = {}
+    for name in list(effects):
+        if name in CAMERA_EFFECTS:
+            camera_kwargs[CAMERA_EFFECTS[name]] = effects.pop(name)
+    plant_effects = PlantEffects.from_dict(effects)
+    if args.noise == "paper":
+        camera = CameraParams.paper_noise(rate=args.camera_rate, **camera_kwargs)
+    elif args.noise == "none":
+        camera = CameraParams(rate=args.camera_rate, **camera_kwargs)
+    else:
+        camera = CameraParams(rate=args.camera_rate, noise=args.noise, e1_noise=args.e1_noise,
+                              e2_noise=args.e2_noise, **camera_kwargs)
+    if not args.log_rate > 0 or args.log_rate > args.physics_rate:
+        raise ParameterError("--log-rate must be > 0 and at most --physics-rate")
+    log = simulate(args.road, args.duration, vehicle=vehicle, tire_model=args.tire, tire=TireParams(mu=args.mu),
+                   camera=camera, effects=plant_effects, physics_rate=args.physics_rate, seed=args.seed)
+    cols = log.to_columns(include_truth=not args.no_truth)
+    step = max(int(round(args.physics_rate / args.log_rate)), 1)
+    keep = _rows_to_keep(cols["e1"], step)
+    write_log(args.out, {k: v[keep] for k, v in cols.items()})
+    print(f"wrote {keep.sum()} rows ({args.duration:g} s, {args.road}) to {args.out}")
+    return 0
+
+
+def _rows_to_keep(e1, step: int):
+    """Every ``step``-th row, plus every row on which a camera frame arrived."""
+    import numpy as np
+
+    keep = np.zeros(len(e1), dtype=bool)
+    keep[::step] = True
+    keep |= np.isfinite(e1)
+    return keep
