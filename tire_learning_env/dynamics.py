@@ -347,6 +347,21 @@ class BicyclePlant:
         """Current error state ``[e1, e1_dot, e2, e2_dot]``."""
         return self.state[:4].copy()
 
+    def true_axle_curve(self, alpha: ArrayLike, axle: str) -> NDArray:
+        """Steady-state truth axle force [N] at slip ``alpha`` (tire times stiffness scale)."""
+        if axle == "front":
+            return self.front_tire.lateral_force(alpha) * self.effects.cornering_stiffness_scale_front
+        if axle == "rear":
+            return self.rear_tire.lateral_force(alpha) * self.effects.cornering_stiffness_scale_rear
+        raise ParameterError(f"axle must be 'front' or 'rear', got {axle!r}")
+
+    def true_cornering_stiffness(self) -> tuple[float, float]:
+        """Per-tire truth cornering stiffness: half the slope of the truth axle curve at zero [N/rad]."""
+        h = 1e-7
+        return tuple(
+            float((self.true_axle_curve(h, a) - self.true_axle_curve(-h, a)) / (4.0 * h)) for a in ("front", "rear")
+        )
+
     def output(self) -> PlantOutput:
         """Ground truth at the current state (using the inputs of the last step)."""
         delta, vx, ax, pdd, pddd = self._last_inputs

@@ -1,0 +1,140 @@
+"""Evaluation metrics shared by every study, estimator and baseline (``metrics.json``).
+
+Keys (the same for every study):
+
+- ``state_rmse`` {e1, e1_dot, e2, e2_dot}: after the burn-in (default 2 s).
+- ``slip_rmse_deg`` {front, rear}: after the burn-in.
+- ``force_nonlinear_nrmse`` {front, rear}: RMSE of ``f_hat`` against the true nonlinear
+  part *relative to the nominal stiffness the estimator assumes*,
+  ``F_true - 2 C_nominal alpha_true``, divided by ``max |F_true|``.
+- ``tire_curve_nrmse`` {front, rear}: learned total axle curve vs the true one on a
+  201-point grid over the excited slip range, divided by the largest ``|F_true|`` there.
+- ``excited_slip_range_deg`` {front: [lo, hi], rear: [lo, hi]}: the 0.5 % and 99.5 %
+  quantiles of the true slip after the burn-in (robust to single spikes).
+- ``cornering_stiffness`` {front: {estimated, true, error_pct}, rear: ...}: per tire [N/rad].
+- ``lmi``: the gain certificate (:meth:`~.observer.gains.ObserverGains.summary`).
+- ``runtime_s``: wall time of the estimator.
+- ``convergence_time_s``: time after which the online tire-curve error stays below 5 %.
+- ``tire_curve_nrmse_nominal``: the same score for the nominal linear curve (what you
+  get without learning), as a reference.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["compute_metrics", "excited_range", "curve_nrmse", "convergence_time", "AXLES"]
+
+AXLES = ("front", "rear")
+CurveFn = Callable[[NDArray, str], NDArray]
+
+
+def excited_range(slip: NDArray, q: float = 0.5) -> tuple[float, float]:
+    """``(lo, hi)`` [rad]: the ``q`` % and ``100 - q`` % quantiles of ``slip``."""
+    return float(np.percentile(slip, q)), float(np.percentile(slip, 100.0 - q))
+
+
+def curve_nrmse(estimated: CurveFn, true: CurveFn, axle: str, lo: float, hi: float, n: int = 201) -> float:
+    """RMS difference of two axle curves on ``[lo, hi]`` divided by the largest true ``|F|`` there."""
+    grid = np.linspace(lo, hi, n)
+    f_true = np.asarray(true(grid, axle), dtype=float)
+    denom = np.max(np.abs(f_true))
+    if not denom > 0:
+        return float("nan")
+    return float(np.sqrt(np.mean((np.asarray(estimated(grid, axle)) - f_true) ** 2)) / denom)
+
+
+def convergence_time(
+    t: NDArray, errors: NDArray, threshold: float = 0.05
+) -> float | None:
+    """First time after which every later error is below ``threshold`` (``None`` if never)."""
+    errors = np.asarray(errors, dtype=float)
+    above = np.flatnonzero(~(errors < threshold))
+    if len(above) == 0:
+        return float(t[0])
+    last = above[-1]
+    return float(t[last + 1]) if last + 1 < len(t) else None
+
+
+def _rmse(a: NDArray, b: NDArray) -> float:
+    return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2)))
+
+
+def compute_metrics(
+    *,
+    t: NDArray,
+    xi_hat: NDArray,
+    slip_hat: NDArray,
+    force_nonlinear_hat: NDArray,
+    truth: Mapping[str, NDArray],
+    curve: CurveFn,
+    true_curve: CurveFn,
+    stiffness_hat: tuple[float, float],
+    stiffness_true: tuple[float, float],
+    nominal_stiffness: tuple[float, float],
+    lmi: dict | None = None,
+    runtime_s: float | None = None,
+    burn_in: float = 2.0,
+    curve_history: tuple[NDArray, Callable[[int], CurveFn]] | None = None,
+) -> dict:
+    """Score an estimate against ground truth with the keys of the module docstring.
+
+    Parameters
+    ----------
+    t : (n,) time [s]
+    xi_hat, slip_hat, force_nonlinear_hat : estimates, shapes (n, 4), (n, 2), (n, 2)
+    truth : mapping with ``true_state`` (n, 4), ``true_slip`` (n, 2), ``true_force`` (n, 2)
+    curve, true_curve : ``(alpha, axle) -> total axle force`` [N], learned and true
+    stiffness_hat, stiffness_true : per-tire cornering stiffness (front, rear) [N/rad]
+    nominal_stiffness : per-tire stiffness the estimator assumed (front, rear) [N/rad]
+    lmi : gain certificate summary
+    runtime_s : estimator wall time [s]
+    burn_in : seconds left out at the start
+    curve_history : ``(times, k -> curve at times[k])`` of the *online* estimate, for
+        ``convergence_time_s``
+    """
+    t = np.asarray(t, dtype=float)
+    keep = t >= t[0] + burn_in
+    x_true = np.asarray(truth["true_state"])[keep]
+    slip_true = np.asarray(truth["true_slip"])[keep]
+    force_true = np.asarray(truth["true_force"])[keep]
+    names = ("e1", "e1_dot", "e2", "e2_dot")
+    out: dict = {
+        "state_rmse": {n: _rmse(xi_hat[keep, i], x_true[:, i]) for i, n in enumerate(names)},
+        "slip_rmse_deg": {a: math.degrees(_rmse(slip_hat[keep, i], slip_true[:, i])) for i, a in enumerate(AXLES)},
+    }
+    nl_true = force_true - slip_true * 2.0 * np.asarray(nominal_stiffness)
+    out["force_nonlinear_nrmse"] = {
+        a: _rmse(force_nonlinear_hat[keep, i], nl_true[:, i]) / float(np.max(np.abs(force_true[:, i])) or np.nan)
+        for i, a in enumerate(AXLES)
+    }
+    ranges = {a: excited_range(slip_true[:, i]) for i, a in enumerate(AXLES)}
+    out["tire_curve_nrmse"] = {a: curve_nrmse(curve, true_curve, a, *ranges[a]) for a in AXLES}
+
+    def nominal(alpha, axle):
+        return 2.0 * nominal_stiffness[AXLES.index(axle)] * np.asarray(alpha)
+
+    out["tire_curve_nrmse_nominal"] = {a: curve_nrmse(nominal, true_curve, a, *ranges[a]) for a in AXLES}
+    out["excited_slip_range_deg"] = {a: [math.degrees(v) for v in ranges[a]] for a in AXLES}
+    out["cornering_stiffness"] = {
+        a: {
+            "estimated": float(stiffness_hat[i]),
+            "true": float(stiffness_true[i]),
+            "error_pct": 100.0 * (float(stiffness_hat[i]) / float(stiffness_true[i]) - 1.0),
+        }
+        for i, a in enumerate(AXLES)
+    }
+    if curve_history is not None:
+        times, curve_at = curve_history
+        errors = np.array(
+            [max(curve_nrmse(curve_at(k), true_curve, a, *ranges[a]) for a in AXLES) for k in range(len(times))]
+        )
+        out["convergence_time_s"] = convergence_time(times, errors)
+    out["lmi"] = lmi or {}
+    out["runtime_s"] = runtime_s
+    out["burn_in_s"] = burn_in
+    return out

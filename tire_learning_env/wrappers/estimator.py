@@ -1,0 +1,189 @@
+"""``EstimatorWrapper``: the neuro-adaptive observer running inside any environment.
+
+On every step the wrapper feeds the observer the step's ``info["sensor_log"]`` (what a
+car knows: steering, speed, curvature, camera frames) and nothing else, and puts the
+estimate in ``info["estimate"]``. Ground truth (``true_*`` keys) stays in ``info`` for
+scoring; the observer never reads it.
+
+>>> import gymnasium as gym
+>>> import numpy as np
+>>> import tire_learning_env
+>>> from tire_learning_env.wrappers import EstimatorWrapper
+>>> env = EstimatorWrapper(gym.make("TireLearning-Cornering-v0"))
+>>> obs, info = env.reset(seed=0)
+>>> for _ in range(200):
+...     obs, reward, terminated, truncated, info = env.step(np.zeros(1, dtype=np.float32))
+>>> sorted(info["estimate"])
+['diverged', 'force', 'force_nonlinear', 'slip', 'state', 'weights']
+>>> bool(abs(info["estimate"]["slip"][0] - info["true_slip"][0]) < 1e-3)
+True
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from ..metrics import compute_metrics
+from ..observer import ObserverConfig, build_observer
+from ..observer.neuro_adaptive import ObserverTrace
+from ..simulation import SENSOR_KEYS
+
+__all__ = ["EstimatorWrapper", "ESTIMATE_OBSERVATION_NAMES"]
+
+ESTIMATE_OBSERVATION_NAMES = ("e1_hat", "e1_dot_hat", "e2_hat", "e2_dot_hat", "alpha_f_hat", "alpha_r_hat")
+_EST_HIGH = np.array([10.0, 20.0, np.pi, 10.0, 0.5, 0.5], dtype=np.float32)
+
+
+class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Run the neuro-adaptive observer on every step of a tire-learning environment.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        Any environment whose ``info`` carries ``sensor_log`` (every registered
+        ``TireLearning-*`` id) and whose unwrapped env has ``estimator_inputs``.
+    config : ObserverConfig, optional
+        Observer settings (gains are synthesised once and cached on disk).
+    append_to_observation : bool
+        Append ``[e1_hat, e1_dot_hat, e2_hat, e2_dot_hat, alpha_f_hat, alpha_r_hat]`` to the
+        observation (the ``Box`` is extended; values clipped to its bounds).
+    keep_history : bool
+        Keep the per-tick estimates and ground truth of the episode for :meth:`metrics`.
+    initial_weights : array, optional
+        Weights to start every episode from (e.g. learned on a previous drive).
+
+    Notes
+    -----
+    ``info["estimate"]`` holds, at the end of the step: ``state`` (4,), ``slip`` (2,),
+    ``force_nonlinear`` (2,), ``force`` (2,), ``weights`` (2N,), ``diverged`` (bool: the
+    innovation stayed beyond its bound on 5 consecutive frames).
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        config: ObserverConfig | None = None,
+        append_to_observation: bool = False,
+        keep_history: bool = True,
+        initial_weights: NDArray | None = None,
+    ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self,
+            config=config,
+            append_to_observation=append_to_observation,
+            keep_history=keep_history,
+            initial_weights=initial_weights,
+        )
+        gym.Wrapper.__init__(self, env)
+        inputs = getattr(env.unwrapped, "estimator_inputs", None)
+        if inputs is None:
+            raise TypeError(f"{type(env.unwrapped).__name__} does not expose estimator_inputs; not a tire-learning env")
+        self.config = config or ObserverConfig()
+        self.observer = build_observer(
+            inputs["vehicle"], inputs["camera"], self.config, inputs["physics_dt"], initial_weights=initial_weights
+        )
+        self.append_to_observation = append_to_observation
+        self.keep_history = keep_history
+        if append_to_observation:
+            base = env.observation_space
+            if not isinstance(base, spaces.Box) or len(base.shape) != 1:
+                raise TypeError("append_to_observation needs a flat Box observation space")
+            self.observation_space = spaces.Box(
+                np.concatenate([base.low, -_EST_HIGH]).astype(np.float32),
+                np.concatenate([base.high, _EST_HIGH]).astype(np.float32),
+                dtype=np.float32,
+            )
+        self._traces: list[ObserverTrace] = []
+        self._truth: list[dict] = []
+        self._last: dict[str, Any] | None = None
+
+    # -- gymnasium API ------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self.observer.reset()
+        self._traces, self._truth = [], []
+        self._last = self._estimate_now()
+        info["estimate"] = self._last
+        return self._observation(obs), info
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        sensors = {k: info["sensor_log"][k] for k in SENSOR_KEYS}
+        trace = self.observer.run(sensors)
+        if self.keep_history:
+            self._traces.append(trace)
+            if "truth_log" in info:
+                self._truth.append(info["truth_log"])
+        self._last = {
+            "state": trace.xi[-1].copy(),
+            "slip": trace.slip[-1].copy(),
+            "force_nonlinear": trace.force_nonlinear[-1].copy(),
+            "force": trace.force[-1].copy(),
+            "weights": trace.weights[-1].copy(),
+            "diverged": bool(trace.diverged),
+        }
+        info["estimate"] = self._last
+        return self._observation(obs), reward, terminated, truncated, info
+
+    # -- helpers --------------------------------------------------------------------------
+    def _estimate_now(self) -> dict[str, Any]:
+        o = self.observer
+        nw = o.basis.n_weights
+        return {
+            "state": o.x.copy(),
+            "slip": np.zeros(2),
+            "force_nonlinear": np.zeros(2),
+            "force": np.zeros(2),
+            "weights": o.w.copy() if len(o.w) == nw else np.zeros(nw),
+            "diverged": o.diverged,
+        }
+
+    def _observation(self, obs):
+        if not self.append_to_observation:
+            return obs
+        est = np.concatenate([self._last["state"], self._last["slip"]]).astype(np.float32)
+        return np.concatenate([np.asarray(obs, dtype=np.float32), np.clip(est, -_EST_HIGH, _EST_HIGH)])
+
+    def tire_curve(self, slip: NDArray, axle: str = "front") -> NDArray:
+        """Learned total axle force [N] at ``slip`` [rad] (eq. 29)."""
+        return self.observer.axle_force(slip, axle)
+
+    def cornering_stiffness(self) -> tuple[float, float]:
+        """Per-tire cornering stiffness of the learned curve [N/rad]."""
+        return self.observer.cornering_stiffness()
+
+    @property
+    def trace(self) -> ObserverTrace | None:
+        """Per-tick estimates of the episode so far."""
+        return ObserverTrace.concatenate(self._traces) if self._traces else None
+
+    def metrics(self, burn_in: float = 2.0) -> dict:
+        """Score the episode so far against the env's ground truth (``metrics.json`` keys)."""
+        if not self._traces or not self._truth:
+            raise RuntimeError("no history: step the env first (and keep keep_history=True)")
+        trace = self.trace
+        truth = {k: np.concatenate([d[k] for d in self._truth]) for k in self._truth[0]}
+        base = self.env.unwrapped
+        plant = getattr(base, "plant", None)
+        if plant is None or not hasattr(plant, "true_axle_curve"):
+            raise RuntimeError("the env's plant does not expose its true tire curve")
+        veh = self.observer.vehicle
+        return compute_metrics(
+            t=trace.t,
+            xi_hat=trace.xi,
+            slip_hat=trace.slip,
+            force_nonlinear_hat=trace.force_nonlinear,
+            truth=truth,
+            curve=self.observer.axle_force,
+            true_curve=plant.true_axle_curve,
+            stiffness_hat=self.observer.cornering_stiffness(),
+            stiffness_true=plant.true_cornering_stiffness(),
+            nominal_stiffness=(veh.Cf, veh.Cr),
+            lmi=self.observer.gains.summary(),
+            burn_in=burn_in,
+        )
