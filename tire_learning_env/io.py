@@ -32,6 +32,7 @@ __all__ = [
     "DrivingLog",
     "read_log",
     "write_log",
+    "write_table",
     "read_vehicle",
     "atomic_write_text",
     "atomic_write_json",
@@ -202,17 +203,21 @@ def read_log(path: str | Path, min_rows: int = 2) -> DrivingLog:
     return DrivingLog(sensors, truth, kind, source, [f"read {len(columns['t'])} rows, {kind} log"])
 
 
-def write_log(path: str | Path, columns: Mapping[str, NDArray]) -> Path:
-    """Write columns as a shared-format CSV, atomically. Known columns first, in order."""
-    names = [c for c in KNOWN_COLUMNS if c in columns] + [c for c in columns if c not in KNOWN_COLUMNS]
+def write_table(path: str | Path, columns: Mapping[str, NDArray]) -> Path:
+    """Write equal-length numeric columns as CSV (header row, NaN as empty), atomically."""
+    names = list(columns)
     n = {len(np.asarray(columns[c])) for c in names}
     if len(n) != 1:
         raise ValueError(f"columns have different lengths: { {c: len(columns[c]) for c in names} }")
     table = np.column_stack([np.asarray(columns[c], dtype=float) for c in names])
-    lines = [",".join(names)]
-    fmt = ["%.10g"] * len(names)
-    body = "\n".join(",".join("" if v != v else f % v for f, v in zip(fmt, row)) for row in table)
-    return atomic_write_text(path, lines[0] + "\n" + body + "\n")
+    body = "\n".join(",".join("" if v != v else "%.10g" % v for v in row) for row in table)
+    return atomic_write_text(path, ",".join(names) + "\n" + body + "\n")
+
+
+def write_log(path: str | Path, columns: Mapping[str, NDArray]) -> Path:
+    """Write a shared-format log CSV, atomically: known columns first, in their order."""
+    names = [c for c in KNOWN_COLUMNS if c in columns] + [c for c in columns if c not in KNOWN_COLUMNS]
+    return write_table(path, {c: columns[c] for c in names})
 
 
 def read_vehicle(path: str | Path | None) -> VehicleParams:
