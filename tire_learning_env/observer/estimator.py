@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -52,6 +52,9 @@ class ObserverConfig(_Params):
         Compensate the camera latency (out-of-sequence correction).
     law, initial_std, random_walk, max_std, step
         Weight adaptation (:class:`.neuro_adaptive.AdaptationParams`).
+    warm_start_std : float, optional
+        Prior std of the weights in the second run, around the warm-start weights
+        (default ``initial_std``).
     """
 
     basis: str = "two_sided"
@@ -67,6 +70,7 @@ class ObserverConfig(_Params):
     random_walk: float = 0.0
     max_std: float = 1.0
     step: float = 0.2
+    warm_start_std: float | None = None
 
     _positive: ClassVar[tuple[str, ...]] = ("force_error_scale", "initial_std", "max_std")
     _non_negative: ClassVar[tuple[str, ...]] = ("decay_rate", "state_weight", "linear_region_deg", "random_walk")
@@ -205,6 +209,8 @@ def estimate(
     trace = online
     if config.warm_start:
         w0 = least_squares_weights(observer.basis, online, linear_region=math.radians(config.linear_region_deg))
+        if config.warm_start_std is not None:
+            observer.adaptation = replace(observer.adaptation, initial_std=config.warm_start_std)
         observer.reset(weights=w0)
         trace = observer.run(sensors)
     runtime = time.perf_counter() - t0

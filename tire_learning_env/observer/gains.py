@@ -19,33 +19,38 @@ state-estimation error obeys
     e_{k+1} = (I - L C) [ (A_T + B_T D_k H) e_k + B_T d_k ] - L v_{k+1}
 
 where ``A_T = exp(A T)``, ``B_T = int_0^T exp(A s) ds F``, ``H = d alpha / d xi`` (eq. 13),
-``D_k = diag(d_f, d_r)`` is the (time-varying) slope of the *true* nonlinear tire force
-``f`` between the true and the estimated slip (mean-value theorem), assumed to lie in
-the box ``[d_lo, d_hi]`` per axle built from the basis slope bounds and ``W_max``
-(:meth:`.basis.SoftClipBasis.force_slope_bounds`, the paper's H1/H2 construction),
-``d_k`` is the force-approximation error [N] (weight error, basis residual) and
-``v`` the camera noise. If there are ``P > 0`` and ``Y = P L`` with, at every vertex
-``D_v`` of the box (4 vertices),
+``D_k = diag(d_f, d_r)`` is the slope of the *model's* nonlinear force between the true
+and the estimated slip (mean-value theorem on ``f_hat``; the paper's ``G Omega sigma~``
+term), which lies in the box ``[d_lo, d_hi]`` per axle that the basis slope bounds and the
+weight bounds imply (:meth:`.basis.SoftClipBasis.force_slope_bounds`, the paper's H1/H2
+and ``W_max`` construction), ``d_k`` is the force error of the model at the true slip
+[N] (weight error and basis residual) and ``v`` the camera noise. With ``A_v`` the four
+vertices of the box, ``A_cl,v = (I - L C) A_v`` and ``Y = P L``, the default objective
+``"h2"`` solves (affine in ``P``, ``Y``, ``Z``)
 
-    [[rho^2 P,      0,        A_v^T P - A_v^T C^T Y^T,  Hs^T],
-     [0,            g I,      Bw^T P - Bw^T C^T Y^T...,  0  ],   >= 0            (LMI)
-     [P A_v - Y C A_v,  ...,  P,                          0  ],
-     [Hs,           0,        0,                          I  ]]
+    minimise trace(Z)  subject to, at every vertex v,
+        [[rho^2 P - Hs^T Hs,  A_cl,v^T P],
+         [P A_cl,v,           P         ]] >= 0                 (decay rho = exp(-alpha T))
+        [[Z,        Bw^T P],
+         [P Bw,     P     ]] >= 0,        P Bw = [P B_T - Y C B_T, -Y]  (scaled)
 
-(written out in :func:`_vertex_matrix`), then for every ``D_k`` in the box
+(:func:`_h2_matrices`), and ``"hinf"`` the bounded-real-lemma version
+(:func:`_vertex_matrix`). If they hold, then for every ``D_k`` in the box, however it
+varies in time,
 
-1. with exact weights and no noise, the state error decays at least as fast as
-   ``rho^k = exp(-alpha t)``: the certified *decay rate* ``alpha`` [1/s];
-2. the slip-angle error is bounded by the force error and the noise with the
-   certified L2 (energy) gain ``sqrt(g)`` (scaled units, see :class:`ObserverGains`):
-   the state error is input-to-state stable with respect to the weight error.
+1. with exact weights and no noise the state error decays at least as fast as
+   ``exp(-alpha t)``: the certified *decay rate* (recomputed from ``P`` and ``L``);
+2. the state error is input-to-state stable with respect to the force error and the
+   noise; for white unit-variance normalised inputs its weighted mean square (slip error
+   in mrad and scaled states) is at most ``trace(Z)`` (``h2``), or its L2 gain at most
+   ``sqrt(g)`` (``hinf``).
 
-The weights are kept bounded by projection onto ``|W_ij| <= W_max``. Their convergence
-to the best approximation (and with it the state error to zero) needs the sensitivity
-regressor ``C Upsilon`` to be persistently exciting: the standard adaptive-observer
-result (Q. Zhang, IEEE TAC 47(3), 2002), which the LMI does not certify and the studies
-show in simulation. The sampled-data model treats ``D`` as constant over a frame
-(exact for a linear tire; first order in ``T`` otherwise), which we state rather than hide.
+The weights stay in their box by projection. Their convergence to the best
+approximation (and with it the state error to zero) needs the sensitivity regressor
+``C Upsilon`` to be persistently exciting: the standard adaptive-observer result
+(Q. Zhang, IEEE TAC 47(3), 2002), which the LMI does not certify and the studies show in
+simulation. The sampled-data model holds ``D`` constant over a frame (exact for a linear
+model; first order in ``T`` otherwise), which we state rather than hide.
 
 Every result is re-checked with numpy (:func:`certify`): ``P`` positive definite and
 the largest eigenvalue of ``-LMI`` at every vertex ``<= tol``. Infeasible requests raise

@@ -1,0 +1,78 @@
+import warnings
+
+import numpy as np
+import pytest
+
+from tire_learning_env.io import LogFormatError, atomic_directory, read_log, write_log
+from tire_learning_env.simulation import simulate
+
+GOOD = "t,vx,delta,kappa,e1,e2\n0,30,0.01,0,0.1,0.01\n0.01,30,0.01,0,,\n0.02,30,0.01,0,0.1,0.01\n"
+
+
+def write(tmp_path, text, name="log.csv"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_reads_a_camera_log_and_keeps_truth_apart(tmp_path):
+    log = simulate("lane_change", 2.0)
+    path = tmp_path / "sim.csv"
+    write_log(path, log.to_columns())
+    d = read_log(path)
+    assert d.kind == "camera"
+    assert not any(k.startswith("true") for k in d.sensors)
+    assert "true_alpha_f" in d.truth
+    np.testing.assert_allclose(d.sensors["t"], log.sensors["t"])
+    assert np.isnan(d.sensors["e1"]).sum() == np.isnan(log.sensors["e1"]).sum()
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("t,vx,delta,kappa,e1\n0,30,0,0,0\n1,30,0,0,0\n", r"\['e2'\] are missing"),
+        ("t,delta,kappa,e1,e2\n0,0,0,0,0\n1,0,0,0,0\n", "required column 'vx'"),
+        ("t,vx,delta,kappa,e1,e2\n0,30,0,0,0,0\n0,30,0,0,0,0\n", "not strictly increasing at row 1"),
+        ("t,vx,delta,kappa,e1,e2\n0,30,5,0,0,0\n1,30,0,0,0,0\n", r"\|delta\| = 5 > 1 rad"),
+        ("t,vx,delta,kappa,e1,e2\n0,0,0,0,0,0\n1,-1,0,0,0,0\n", "vx <= 0 over the whole log"),
+        ("", "empty"),
+        ("t,vx,delta,kappa,e1,e2\n", "no rows"),
+        ("t,vx,delta,kappa,e1,e2\n0,30,0,0,0,0\n", "only 1 rows"),
+        ("t,vx,delta,kappa,e1,e2\n0,30,0,0,0\n", "values per row|malformed"),
+    ],
+)
+def test_bad_logs_raise_naming_the_problem(tmp_path, text, message):
+    with pytest.raises(LogFormatError, match=message):
+        read_log(write(tmp_path, text))
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(LogFormatError, match="cannot read"):
+        read_log(tmp_path / "nope.csv")
+
+
+def test_unknown_columns_are_named_in_a_warning(tmp_path):
+    text = GOOD.replace("e2\n", "e2,odometer\n", 1).replace("0.01\n", "0.01,5\n").replace(",,\n", ",,5\n")
+    with pytest.warns(UserWarning, match="odometer"):
+        read_log(write(tmp_path, text))
+
+
+def test_imu_only_log_is_recognised(tmp_path):
+    text = "t,vx,delta,yaw_rate,ay\n0,30,0,0,0\n0.01,30,0,0,0\n"
+    assert read_log(write(tmp_path, text)).kind == "imu"
+
+
+def test_atomic_directory_keeps_the_old_results_on_failure(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "old.txt").write_text("previous results")
+    with pytest.raises(RuntimeError):
+        with atomic_directory(out) as tmp:
+            (tmp / "half.txt").write_text("half written")
+            raise RuntimeError("crash half-way")
+    assert (out / "old.txt").read_text() == "previous results"
+    assert not (out / "half.txt").exists()
+    with atomic_directory(out) as tmp:
+        (tmp / "new.txt").write_text("new")
+    assert (out / "new.txt").exists() and not (out / "old.txt").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
