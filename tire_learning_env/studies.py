@@ -76,7 +76,11 @@ class StudySpec:
     notes: tuple[str, ...] = field(default_factory=tuple)
 
     def with_camera(self, rate: float | None = None, noise: str | None = None) -> "StudySpec":
-        """Variant with another camera rate and/or noise (``"paper"`` or ``"none"``)."""
+        """Variant with another camera rate and/or noise (``"paper"`` or ``"none"``).
+
+        The observer settings follow the camera (:meth:`ObserverConfig.for_camera`), with
+        the study's knowledge of the stiffness.
+        """
         cam = self.camera
         rate = cam.rate if rate is None else rate
         if noise == "paper":
@@ -87,7 +91,8 @@ class StudySpec:
             raise ParameterError(f"noise must be 'paper' or 'none', got {noise!r}")
         else:
             cam = cam.replace(rate=rate)
-        return replace(self, camera=cam)
+        known = self.config.linear_region_deg > 0
+        return replace(self, camera=cam, config=ObserverConfig.for_camera(cam, stiffness_known=known, basis=self.config.basis))
 
 
 STUDY_IDS = (1, 2, 3)
@@ -105,7 +110,7 @@ def study_spec(study: int, duration: float | None = None) -> StudySpec:
             true_vehicle=sedan,
             nominal_vehicle=sedan,
             camera=CameraParams(rate=1000.0),
-            config=ObserverConfig(),
+            config=ObserverConfig.for_camera(CameraParams(rate=1000.0), stiffness_known=True),
             notes=(
                 "paper settings: 1 kHz noise-free camera, zero initial state, LS warm start; the certified "
                 "decay rate (reported under lmi) exceeds the paper's 2 1/s",
@@ -128,7 +133,7 @@ def study_spec(study: int, duration: float | None = None) -> StudySpec:
                 true_vehicle=truth,
                 nominal_vehicle=nominal,
                 camera=CameraParams(rate=1000.0),
-                config=ObserverConfig(linear_region_deg=0.0),
+                config=ObserverConfig.for_camera(CameraParams(rate=1000.0), stiffness_known=False),
                 notes=(
                     "CommonRoad multi-body model (BMW 320i, PAC2002, 0.45 m relaxation), 1 kHz noise-free camera",
                     "assumed stiffness = effective axle stiffness x the paper's ratios 102466/90211 and 102466/87946",
@@ -144,7 +149,7 @@ def study_spec(study: int, duration: float | None = None) -> StudySpec:
                 true_vehicle=truth,
                 nominal_vehicle=truth.replace(Cf=c_eff[0], Cr=c_eff[1]),
                 camera=CameraParams.paper_noise(rate=1000.0),
-                config=ObserverConfig(),
+                config=ObserverConfig.for_camera(CameraParams.paper_noise(rate=1000.0), stiffness_known=True),
                 notes=(
                     "CommonRoad multi-body model (BMW 320i, PAC2002, 0.45 m relaxation), 1 kHz camera with the "
                     "paper's uniform noise",

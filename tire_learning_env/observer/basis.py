@@ -166,6 +166,33 @@ class SoftClipBasis:
         """Largest ``(W_hi - W_lo)/2`` over the weights (a natural unit for priors)."""
         return float(np.max(self.weight_upper - self.weight_lower) / 2.0)
 
+    def prior_correlation(self, length: float = 0.0, symmetry: float = 0.0) -> NDArray:
+        """Prior correlation of the weights, (2N, 2N), block-diagonal per axle.
+
+        Smooth-curve prior for slope-segment bases: weights of segments ``k`` apart (in
+        segment index, same side of zero) correlate as ``exp(-k / length)``, mirror
+        segments (same ``|slip|``, other side) as ``symmetry`` times that; constant
+        members are uncorrelated. ``length = 0`` gives the identity (independent weights).
+        """
+        N = self.n_per_axle
+        corr = np.eye(N)
+        if length > 0:
+            mid = 0.5 * (self.lower[0] + self.upper[0])
+            const = self.lower[0] == self.upper[0]
+            order = np.argsort(np.abs(mid))
+            rank = np.empty(N)
+            # rank of |centre| among the members of the same side (0 = next to zero slip)
+            for side in (-1, 1):
+                idx = [j for j in order if not const[j] and np.sign(mid[j]) == side]
+                rank[idx] = np.arange(len(idx))
+            for i in range(N):
+                for j in range(N):
+                    if i == j or const[i] or const[j]:
+                        continue
+                    c = math.exp(-abs(rank[i] - rank[j]) / length)
+                    corr[i, j] = c if np.sign(mid[i]) == np.sign(mid[j]) else symmetry * c
+        return np.kron(np.eye(2), corr)
+
     def force_slope_bounds(self, margin: float = 0.01) -> NDArray:
         """Bounds ``[[lo_f, hi_f], [lo_r, hi_r]]`` [N/rad] of ``d f_i/d alpha`` over all admissible weights.
 

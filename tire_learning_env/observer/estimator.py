@@ -71,6 +71,8 @@ class ObserverConfig(_Params):
     max_std: float = 1.0
     step: float = 0.2
     warm_start_std: float | None = None
+    prior_length: float = 1.0
+    prior_symmetry: float = 0.0
 
     _positive: ClassVar[tuple[str, ...]] = ("force_error_scale", "initial_std", "max_std")
     _non_negative: ClassVar[tuple[str, ...]] = ("decay_rate", "state_weight", "linear_region_deg", "random_walk")
@@ -83,10 +85,31 @@ class ObserverConfig(_Params):
             raise ParameterError(f"ObserverConfig.objective must be 'h2' or 'hinf', got {self.objective!r}")
         self.adaptation()  # validates the adaptation fields
 
+    @classmethod
+    def for_camera(cls, camera: CameraParams, stiffness_known: bool = True, **overrides) -> "ObserverConfig":
+        """Settings matched to the camera and to what is known about the tire.
+
+        A noisy camera with a trusted nominal stiffness gets a low-bandwidth design
+        (``decay_rate=0.5``, ``force_error_scale=30`` N: the model error left is the tire
+        nonlinearity only); otherwise the defaults (1 1/s, 100 N: a wrong stiffness
+        makes force errors of a few hundred newtons that the gain must follow while the
+        weights learn). An unknown stiffness also drops the warm start's linear-region
+        rule (it would pin the slope at zero slip to the wrong nominal value).
+        """
+        noisy = camera.noise != "none" and (camera.e1_noise > 0 or camera.e2_noise > 0)
+        kw: dict = {}
+        if noisy and stiffness_known:
+            kw.update(decay_rate=0.5, force_error_scale=30.0)
+        if not stiffness_known:
+            kw.update(linear_region_deg=0.0)
+        kw.update(overrides)
+        return cls(**kw)
+
     def adaptation(self) -> AdaptationParams:
         return AdaptationParams(
-            law=self.law, initial_std=self.initial_std, random_walk=self.random_walk, max_std=self.max_std, step=self.step
-        )
+            law=self.law, initial_std=self.initial_std, random_walk=self.random_walk, max_std=self.max_std,
+            step=self.step, prior_length=self.prior_length, prior_symmetry=self.prior_symmetry,
+        )  # fmt: skip
 
 
 def build_observer(
@@ -208,7 +231,10 @@ def estimate(
     w0 = None
     trace = online
     if config.warm_start:
-        w0 = least_squares_weights(observer.basis, online, linear_region=math.radians(config.linear_region_deg))
+        w0 = least_squares_weights(
+            observer.basis, online, linear_region=math.radians(config.linear_region_deg),
+            prior=observer.basis.prior_correlation(config.prior_length, config.prior_symmetry),
+        )  # fmt: skip
         if config.warm_start_std is not None:
             observer.adaptation = replace(observer.adaptation, initial_std=config.warm_start_std)
         observer.reset(weights=w0)

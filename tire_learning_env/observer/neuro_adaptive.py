@@ -69,6 +69,10 @@ class AdaptationParams:
         Weights are frozen after a reset until the initial state error has decayed by
         ``exp(-settle_time_constants)`` at the certified rate (3: to 5 %), so the start-up
         transient is not learned as a tire force.
+    prior_length, prior_symmetry : float
+        Smooth-curve prior: the initial covariance is ``(initial_std r)^2`` times
+        :meth:`~.basis.SoftClipBasis.prior_correlation` (neighbouring slip segments and
+        mirror segments learn together); 0 makes the weights independent.
     """
 
     law: str = "rls"
@@ -78,6 +82,8 @@ class AdaptationParams:
     measurement_std: tuple[float, float] | None = None
     step: float = 0.2
     settle_time_constants: float = 3.0
+    prior_length: float = 1.0
+    prior_symmetry: float = 0.0
 
     def __post_init__(self) -> None:
         if self.law not in ("rls", "gradient"):
@@ -424,7 +430,9 @@ class NeuroAdaptiveObserver:
         w0 = self.initial_weights if weights is None else np.asarray(weights, dtype=float)
         self.w = np.clip(w0, self.basis.weight_lower.ravel(), self.basis.weight_upper.ravel()).astype(float)
         self.ups = np.zeros((4, nw))
-        self.pw = np.eye(nw) * (self.adaptation.initial_std * self.basis.weight_range) ** 2
+        a = self.adaptation
+        corr = self.basis.prior_correlation(a.prior_length, a.prior_symmetry)
+        self.pw = np.ascontiguousarray(corr * (a.initial_std * self.basis.weight_range) ** 2)
         hlen = max(self.latency_ticks + 2, 2)
         self.hist_x = np.zeros((hlen, 4))
         self.hist_ups = np.zeros((hlen, 4, nw))

@@ -34,6 +34,7 @@ def least_squares_weights(
     linear_region: float = math.radians(0.5),
     rho: float | None = None,
     burn_in: float = 2.0,
+    prior: NDArray | None = None,
 ) -> NDArray:
     """Regularised least-squares weights from an observer run (eq. 28).
 
@@ -51,6 +52,9 @@ def least_squares_weights(
         driving excites the tire).
     burn_in : float
         Samples before this time [s] (observer transient) are left out.
+    prior : ndarray (2N, 2N), optional
+        Prior correlation of the weights: the ridge becomes ``rho prior^-1`` (Tikhonov),
+        ``rho I`` of eq. (28) when omitted.
 
     Returns
     -------
@@ -59,6 +63,7 @@ def least_squares_weights(
     """
     keep = trace.t >= trace.t[0] + burn_in
     w0 = []
+    N = basis.n_per_axle
     for axle in (0, 1):
         a = trace.slip[keep, axle]
         y = trace.force_nonlinear[keep, axle].copy()
@@ -66,5 +71,6 @@ def least_squares_weights(
         X = regressors(basis, a, axle)
         XtX = X.T @ X
         reg = 1e-4 * float(np.mean(np.diag(XtX))) if rho is None else float(rho)
-        w0.append(np.linalg.solve(XtX + reg * np.eye(X.shape[1]), X.T @ y))
+        tik = np.eye(N) if prior is None else np.linalg.inv(prior[axle * N : (axle + 1) * N, axle * N : (axle + 1) * N])
+        w0.append(np.linalg.solve(XtX + reg * tik, X.T @ y))
     return np.clip(np.concatenate(w0), basis.weight_lower.ravel(), basis.weight_upper.ravel())
