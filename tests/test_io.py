@@ -52,9 +52,10 @@ def test_missing_file(tmp_path):
 
 
 def test_unknown_columns_are_named_in_a_warning(tmp_path):
-    text = GOOD.replace("e2\n", "e2,odometer\n", 1).replace("0.01\n", "0.01,5\n").replace(",,\n", ",,5\n")
+    text = "t,vx,delta,kappa,e1,e2,odometer\n0,30,0.01,0,0.1,0.01,5\n0.01,30,0.01,0,,,5\n"
     with pytest.warns(UserWarning, match="odometer"):
-        read_log(write(tmp_path, text))
+        log = read_log(write(tmp_path, text))
+    assert "odometer" not in log.sensors and np.isnan(log.sensors["e1"][1])
 
 
 def test_imu_only_log_is_recognised(tmp_path):
