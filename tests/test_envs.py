@@ -118,3 +118,13 @@ def test_sb3_vec_env():
     assert obs.shape == (2, 6)
     obs, rew, done, infos = vec.step(np.zeros((2, 1), dtype=np.float32))
     assert len(infos) == 2 and "true_slip" in infos[0]
+
+
+def test_end_of_step_truth_matches_the_last_logged_tick():
+    env = gym.make("TireLearning-Cornering-v0")
+    env.reset(seed=0)
+    for _ in range(300):
+        _, _, _, _, info = env.step(np.zeros(1, dtype=np.float32))
+    # one tick after the last logged row, with the same held steering: nearly equal
+    np.testing.assert_allclose(info["true_slip"], info["truth_log"]["true_slip"][-1], rtol=1e-3, atol=1e-6)
+    np.testing.assert_allclose(info["true_force"], info["truth_log"]["true_force"][-1], rtol=1e-3, atol=1e-3)

@@ -234,6 +234,10 @@ class Simulator:
                 f"simulation blew up at t={t:.4f} s: state {self.plant.state.tolist()}, delta={delta}"
             )
         self.s, self.last_delta = s, delta
+        # the inputs held at the end of the chunk, as BicyclePlant.step records them (for output())
+        k, dk = self.table.lookup(s)
+        vx_end = vx + self.dt * ax
+        self.plant._last_inputs = (delta, vx_end, ax, vx_end * k, vx_end * vx_end * dk + ax * k)
 
     def _advance_python(self, n_ticks: int, steering_offset: float, steering: float | None, out: NDArray) -> None:
         """The same tick sequence as :func:`._kernels.advance_bicycle`, for any plant."""

@@ -549,6 +549,29 @@ class NeuroAdaptiveObserver:
             "e2": np.array([e2]),
         }
 
+    def estimate_now(self, delta: float, psi_dot_des: float, vx: float | None = None) -> dict[str, NDArray]:
+        """The current (predicted) estimate with the inputs held: state, slip, forces.
+
+        After :meth:`run` the observer has predicted to the instant after the last row;
+        this evaluates slip (eq. 13) and force (eq. 14, 29) there, the same instant as an
+        env's end-of-step ground truth.
+        """
+        vx = self.vehicle.vx if vx is None else vx
+        v = self.vehicle
+        x = self.x
+        af = delta - (x[1] - vx * x[2] + v.lf * x[3] + v.lf * psi_dot_des) / vx
+        ar = -(x[1] - vx * x[2] - v.lr * x[3] - v.lr * psi_dot_des) / vx
+        slip = np.array([af, ar])
+        fnl = np.array([float(self.basis.nonlinear_force(slip[i], self.w, i)) for i in (0, 1)])
+        return {
+            "state": x.copy(),
+            "slip": slip,
+            "force_nonlinear": fnl,
+            "force": fnl + slip * np.array([2 * v.Cf, 2 * v.Cr]),
+            "weights": self.w.copy(),
+            "diverged": self.diverged,
+        }
+
     # -- learned tire curve (eq. 29) -------------------------------------------------------
     def axle_force(self, alpha: NDArray, axle: str, weights: NDArray | None = None) -> NDArray:
         """Learned total axle force ``2 C alpha + gamma sum W sigma(alpha)`` [N] (eq. 29)."""

@@ -59,7 +59,8 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     Notes
     -----
-    ``info["estimate"]`` holds, at the end of the step: ``state`` (4,), ``slip`` (2,),
+    ``info["estimate"]`` holds, at the end of the step (the instant of the ``true_*``
+    keys; the prediction from the last frame): ``state`` (4,), ``slip`` (2,),
     ``force_nonlinear`` (2,), ``force`` (2,), ``weights`` (2N,), ``diverged`` (bool: the
     innovation stayed beyond its bound on 5 consecutive frames).
     """
@@ -119,29 +120,14 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             self._traces.append(trace)
             if "truth_log" in info:
                 self._truth.append(info["truth_log"])
-        self._last = {
-            "state": trace.xi[-1].copy(),
-            "slip": trace.slip[-1].copy(),
-            "force_nonlinear": trace.force_nonlinear[-1].copy(),
-            "force": trace.force[-1].copy(),
-            "weights": trace.weights[-1].copy(),
-            "diverged": bool(trace.diverged),
-        }
+        # the estimate at the end of the step, the instant of the info's ground truth
+        self._last = self.observer.estimate_now(sensors["delta"][-1], sensors["psi_dot_des"][-1], sensors["vx"][-1])
         info["estimate"] = self._last
         return self._observation(obs), reward, terminated, truncated, info
 
     # -- helpers --------------------------------------------------------------------------
     def _estimate_now(self) -> dict[str, Any]:
-        o = self.observer
-        nw = o.basis.n_weights
-        return {
-            "state": o.x.copy(),
-            "slip": np.zeros(2),
-            "force_nonlinear": np.zeros(2),
-            "force": np.zeros(2),
-            "weights": o.w.copy() if len(o.w) == nw else np.zeros(nw),
-            "diverged": o.diverged,
-        }
+        return self.observer.estimate_now(0.0, 0.0)
 
     def _observation(self, obs):
         if not self.append_to_observation:
