@@ -52,8 +52,15 @@ def run(args: argparse.Namespace) -> int:
     if log.kind == "imu":
         from ..imu import estimate_imu_log
 
-        estimate_imu_log(log, vehicle, args.out, basis=args.basis, warm_start=not args.no_warm_start)
-        print(f"wrote {args.out}")
+        metrics = estimate_imu_log(log, vehicle, args.out, basis=args.basis, warm_start=not args.no_warm_start)
+        k = metrics["cornering_stiffness"]["final"]["per_axle_N_per_rad"]
+        line = f"wrote {args.out}: IMU log, axle stiffness front {k['front']:.0f} N/rad, rear {k['rear']:.0f} N/rad"
+        ref = metrics.get("reference_scores")
+        if ref:
+            rm = ref["sideslip_rmse_deg"]
+            line += (f"; sideslip RMSE {rm['observer_online_causal']['whole']:.3f} deg (causal observer), "
+                     f"{rm['linear_kf_baseline']['whole']:.3f} deg (linear KF)")  # fmt: skip
+        print(line)
         return 0
     return _run_camera(log, vehicle, args)
 

@@ -1,0 +1,273 @@
+"""Reading and cleaning real IMU-only driving logs (``LOG_FORMAT.md``, IMU-only form).
+
+:func:`..io.read_log` does the generic, strict part (required columns, monotonic time,
+units of ``delta``, truth kept apart). This module adds what an IMU log needs and what a
+real one gets wrong, and *reports* everything it changes (:class:`CleaningReport`, also
+appended to ``log.notes``):
+
+Errors (:class:`..io.LogFormatError`, naming the problem)
+    - no ``yaw_rate`` or ``ay`` column;
+    - sampling that is not (nearly) uniform: a gap or jitter over 25 % of the median step
+      (the gains are certified for one step; split or resample the log);
+    - ``yaw_rate`` that cannot be in rad/s (``|r| > 5 rad/s``: deg/s?);
+    - ``ay`` that cannot be in m/s^2 or has the wrong sign: while cornering, ``a_y`` must
+      follow ``vx r`` (slope 0.5-2; a slope near 0.1 means g units, a negative one the
+      opposite sign convention);
+    - ``delta`` whose sign disagrees with the yaw rate (``delta`` vs ``L r / vx``);
+    - too few rows with a valid IMU sample.
+
+Cleaning (causal: each sample is judged from the past only, as a car would on line)
+    - ``delta`` and ``yaw_rate`` samples that jump from the last accepted value by more
+      than a physical rate allows (road-wheel rate ``max_steer_rate``, yaw acceleration
+      ``max_yaw_accel``) are replaced by that value: a single-sample spike (the 1 kHz ->
+      100 Hz decimation defect of the Revs steering channel) disappears; genuine motion is
+      never that fast. A jump that persists over 3 samples is accepted as a real level
+      change (and counted).
+    - ``ay`` beyond ``max_abs_ay`` (3 g: no road car tire makes that) becomes NaN.
+    - NaN ``ay``/``yaw_rate`` samples are kept as NaN: the observer predicts through them.
+
+Noise is *not* filtered here: the certified gains (H2, noise std in the design) and the
+regression weight the measurements; vibration bursts in ``a_y`` (kerbs) are real signal
+content of the accelerometer and are counted, not removed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..io import DrivingLog, LogFormatError, read_log
+from ..params import VehicleParams
+
+__all__ = ["CleaningReport", "clean_imu_log", "read_imu_log", "check_imu_log"]
+
+
+@dataclass
+class CleaningReport:
+    """What :func:`clean_imu_log` found and changed.
+
+    Attributes
+    ----------
+    rows : int
+    dt : float
+        Median sample period [s].
+    steering_spikes : dict
+        ``count``, ``t`` (times), ``max_deviation_rad`` of the replaced ``delta`` samples,
+        and ``level_jumps_accepted``.
+    yaw_rate_spikes : dict
+        The same for ``yaw_rate``.
+    ay_out_of_range : dict
+        ``count`` and ``t`` of ``a_y`` samples set to NaN.
+    missing : dict
+        NaN counts of ``ay`` and ``yaw_rate`` after cleaning (prediction-only rows).
+    repeated_fraction : dict
+        Fraction of rows repeating the previous value exactly (sample-and-hold of a
+        slower sensor; information only).
+    ay_high_frequency_std : float
+        Std of ``a_y`` minus its 3-sample moving mean [m/s^2] (vibration level; information).
+    checks : dict
+        Unit and sign checks with their measured values.
+    """
+
+    rows: int
+    dt: float
+    steering_spikes: dict = field(default_factory=dict)
+    yaw_rate_spikes: dict = field(default_factory=dict)
+    ay_out_of_range: dict = field(default_factory=dict)
+    missing: dict = field(default_factory=dict)
+    repeated_fraction: dict = field(default_factory=dict)
+    ay_high_frequency_std: float = float("nan")
+    checks: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {
+            "rows": self.rows,
+            "dt_s": self.dt,
+            "steering_spikes": self.steering_spikes,
+            "yaw_rate_spikes": self.yaw_rate_spikes,
+            "ay_out_of_range": self.ay_out_of_range,
+            "missing_samples": self.missing,
+            "repeated_value_fraction": self.repeated_fraction,
+            "ay_high_frequency_std_mps2": self.ay_high_frequency_std,
+            "checks": self.checks,
+        }
+
+    def notes(self) -> list[str]:
+        """One line per cleaning action (for ``log.notes``)."""
+        out = [
+            f"steering: {self.steering_spikes['count']} spike sample(s) replaced by the previous value"
+            + (f" at t = {self.steering_spikes['t'][:10]}" if self.steering_spikes["count"] else ""),
+            f"yaw_rate: {self.yaw_rate_spikes['count']} spike sample(s) replaced by the previous value",
+            f"ay: {self.ay_out_of_range['count']} sample(s) beyond the physical bound set to NaN",
+            f"missing (prediction-only) samples: ay {self.missing['ay']}, yaw_rate {self.missing['yaw_rate']}",
+        ]
+        return out
+
+
+def _spike_hold(x: NDArray, max_step: float, max_hold: int = 3) -> tuple[NDArray, NDArray, int]:
+    """Causal spike removal: a sample that jumps more than ``max_step`` from the last accepted
+    value is replaced by that value (held); after ``max_hold`` consecutive such samples
+    the new level is accepted (a real level change, counted).
+
+    NaN samples pass through. Returns ``(y, replaced_mask, accepted_jumps)``.
+    """
+    y = np.array(x, dtype=float, copy=True)
+    replaced = np.zeros(len(y), dtype=bool)
+    last = np.nan
+    held = 0
+    accepted = 0
+    for k in range(len(y)):
+        v = y[k]
+        if v != v:
+            continue
+        if last == last and abs(v - last) > max_step:
+            if held < max_hold:
+                y[k] = last
+                replaced[k] = True
+                held += 1
+                continue
+            accepted += 1
+        held = 0
+        last = v
+    return y, replaced, accepted
+
+
+def check_imu_log(log: DrivingLog, vehicle: VehicleParams | None = None, jitter: float = 0.25) -> dict:
+    """The error checks of the module docstring; returns the measured values.
+
+    Raises
+    ------
+    LogFormatError
+    """
+    s = log.sensors
+    src = log.source or "log"
+    missing = [c for c in ("yaw_rate", "ay") if c not in s]
+    if missing:
+        raise LogFormatError(f"{src}: an IMU log needs columns yaw_rate [rad/s] and ay [m/s^2]; missing {missing}")
+    t = s["t"]
+    if len(t) < 3:
+        raise LogFormatError(f"{src}: only {len(t)} rows; an IMU log needs at least 3")
+    dt = np.diff(t)
+    med = float(np.median(dt))
+    bad = np.flatnonzero(np.abs(dt - med) > jitter * med)
+    if len(bad):
+        i = int(bad[0])
+        raise LogFormatError(
+            f"{src}: non-uniform sampling: step {dt[i]:.4g} s at t={t[i]:.4f} (median {med:.4g} s; "
+            f"{len(bad)} step(s) off by more than {100 * jitter:.0f} %). Split the log at the gap or resample it."
+        )
+    r, ay, vx, delta = s["yaw_rate"], s["ay"], s["vx"], s["delta"]
+    fin = np.isfinite(r) & np.isfinite(ay)
+    if fin.sum() < 3:
+        raise LogFormatError(f"{src}: fewer than 3 rows have both ay and yaw_rate")
+    rmax = float(np.nanmax(np.abs(r)))
+    if rmax > 5.0:
+        raise LogFormatError(f"{src}: |yaw_rate| reaches {rmax:.3g} > 5 rad/s: yaw_rate must be in rad/s (deg/s given?)")
+    if np.any(vx <= 0):
+        i = int(np.argmax(vx <= 0))
+        raise LogFormatError(f"{src}: vx = {vx[i]:.3g} <= 0 at t={t[i]}: the IMU observer needs forward motion (m/s)")
+    checks: dict = {"median_dt_s": med}
+    vr = vx * r
+    turning = fin & (np.abs(vr) > 2.0)
+    if turning.sum() >= 50:
+        slope = float(np.sum(ay[turning] * vr[turning]) / np.sum(vr[turning] ** 2))
+        checks["ay_vs_vx_r_slope"] = slope
+        if slope < 0:
+            raise LogFormatError(
+                f"{src}: ay follows -vx*yaw_rate (slope {slope:.3g}): opposite sign convention of ay or "
+                "yaw_rate (both must be positive to the left)"
+            )
+        if not 0.5 <= slope <= 2.0:
+            hint = " (ay in g? it must be in m/s^2)" if 0.05 <= slope <= 0.2 else ""
+            raise LogFormatError(f"{src}: ay / (vx*yaw_rate) = {slope:.3g}, not near 1: wrong units of ay{hint}")
+    else:
+        checks["ay_vs_vx_r_slope"] = None
+        checks["note"] = "too little cornering to check the units and sign of ay"
+    if vehicle is not None:
+        kin = vehicle.wheelbase * r / np.maximum(vx, 1.0)
+        sel = fin & (np.abs(r) > 0.05)
+        if sel.sum() >= 50:
+            corr = float(np.corrcoef(delta[sel], kin[sel])[0, 1])
+            checks["delta_vs_L_r_over_vx_corr"] = corr
+            if corr < 0:
+                raise LogFormatError(
+                    f"{src}: delta correlates negatively ({corr:.2f}) with L*yaw_rate/vx: opposite steering sign "
+                    "convention (delta must be positive to the left)"
+                )
+    return checks
+
+
+def clean_imu_log(
+    log: DrivingLog,
+    vehicle: VehicleParams | None = None,
+    max_steer_rate: float = 2.0,
+    max_yaw_accel: float = 20.0,
+    max_abs_ay: float = 30.0,
+) -> tuple[DrivingLog, CleaningReport]:
+    """Checked and cleaned copy of an IMU log, and the report of what was done.
+
+    Parameters
+    ----------
+    log : DrivingLog
+        From :func:`..io.read_log` (truth stays in ``log.truth``, untouched).
+    vehicle : VehicleParams, optional
+        Enables the steering sign check.
+    max_steer_rate : float
+        Largest physical road-wheel rate [rad/s] (2 rad/s is ~1500 deg/s at a 13.5:1
+        steering wheel: beyond any driver).
+    max_yaw_accel : float
+        Largest physical yaw acceleration [rad/s^2].
+    max_abs_ay : float
+        Largest physical lateral acceleration [m/s^2].
+    """
+    checks = check_imu_log(log, vehicle)
+    s = {k: np.array(v, dtype=float, copy=True) for k, v in log.sensors.items()}
+    t = s["t"]
+    dt = float(np.median(np.diff(t)))
+    raw_delta = s["delta"]
+    delta, lim_d, jumps_d = _spike_hold(raw_delta, max_steer_rate * dt)
+    yaw, lim_r, jumps_r = _spike_hold(s["yaw_rate"], max_yaw_accel * dt)
+    ay = s["ay"]
+    out = np.abs(ay) > max_abs_ay
+    ay = np.where(out, np.nan, ay)
+    s["delta"], s["yaw_rate"], s["ay"] = delta, yaw, ay
+
+    def rep_frac(x):
+        x = x[np.isfinite(x)]
+        return float(np.mean(np.diff(x) == 0)) if len(x) > 1 else 0.0
+
+    fin = ay[np.isfinite(ay)]
+    hf = float(np.std(fin[1:-1] - (fin[:-2] + fin[1:-1] + fin[2:]) / 3.0)) if len(fin) > 3 else float("nan")
+    report = CleaningReport(
+        rows=len(t),
+        dt=dt,
+        steering_spikes={
+            "count": int(lim_d.sum()),
+            "t": t[lim_d].round(4).tolist(),
+            "max_deviation_rad": float(np.max(np.abs(raw_delta - delta))) if lim_d.any() else 0.0,
+            "limit_rad_per_s": max_steer_rate,
+            "level_jumps_accepted": jumps_d,
+        },
+        yaw_rate_spikes={
+            "count": int(lim_r.sum()),
+            "t": t[lim_r].round(4).tolist()[:50],
+            "limit_rad_per_s2": max_yaw_accel,
+            "level_jumps_accepted": jumps_r,
+        },
+        ay_out_of_range={"count": int(out.sum()), "t": t[out].round(4).tolist()[:50], "limit_mps2": max_abs_ay},
+        missing={"ay": int(np.isnan(ay).sum()), "yaw_rate": int(np.isnan(yaw).sum())},
+        repeated_fraction={k: rep_frac(log.sensors[k]) for k in ("delta", "yaw_rate", "ay", "vx")},
+        ay_high_frequency_std=hf,
+        checks=checks,
+    )
+    cleaned = DrivingLog(s, log.truth, log.kind, log.source, list(log.notes) + report.notes())
+    return cleaned, report
+
+
+def read_imu_log(path: str | Path, vehicle: VehicleParams | None = None, **cleaning) -> tuple[DrivingLog, CleaningReport]:
+    """:func:`..io.read_log` then :func:`clean_imu_log` (keyword arguments go to the latter)."""
+    log = read_log(path)
+    return clean_imu_log(log, vehicle, **cleaning)
