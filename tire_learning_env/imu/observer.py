@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from ..observer._rls import projected_step, rls_gain
 from ..observer.basis import SoftClipBasis
 from ..params import ParameterError, VehicleParams
 from .gains import ImuGains
@@ -153,52 +154,8 @@ def _imu_kernel(
                     dwa = (cd * phi[a] if a < N else phi[a]) / m
                     psi[0, a] = c00 * ups[0, a] + c01 * ups[1, a] + dwa
                     psi[1, a] = ups[1, a]
-                for a in range(nw):  # (P Psi^T)^T
-                    s0 = 0.0
-                    s1 = 0.0
-                    for b in range(nw):
-                        s0 += pw[a, b] * psi[0, b]
-                        s1 += pw[a, b] * psi[1, b]
-                    pk[0, a] = s0
-                    pk[1, a] = s1
-                s00 = r_ay
-                s01 = 0.0
-                s11 = r_r
-                for a in range(nw):
-                    s00 += psi[0, a] * pk[0, a]
-                    s01 += psi[0, a] * pk[1, a]
-                    s11 += psi[1, a] * pk[1, a]
-                det = s00 * s11 - s01 * s01
-                i00 = s11 / det
-                i01 = -s01 / det
-                i11 = s00 / det
-                for a in range(nw):
-                    kg[a, 0] = pk[0, a] * i00 + pk[1, a] * i01
-                    kg[a, 1] = pk[0, a] * i01 + pk[1, a] * i11
-                for a in range(nw):  # P <- P - K Psi P
-                    for b in range(nw):
-                        pw[a, b] -= kg[a, 0] * pk[0, b] + kg[a, 1] * pk[1, b]
-                if q_rate > 0.0:
-                    qd = q_rate * h
-                    for a in range(nw):
-                        pw[a, a] += qd
-                for a in range(nw):  # covariance cap: P_w stays bounded without excitation
-                    if pw[a, a] > p_max:
-                        sc = math.sqrt(p_max / pw[a, a])
-                        for b in range(nw):
-                            pw[a, b] *= sc
-                            pw[b, a] *= sc
-                moved = False
-                for a in range(nw):  # projection onto the weight box
-                    wn = w[a] + kg[a, 0] * nu0 + kg[a, 1] * nu1
-                    if wn > whi[a]:
-                        wn = whi[a]
-                    elif wn < wlo[a]:
-                        wn = wlo[a]
-                    dw[a] = wn - w[a]
-                    if dw[a] != 0.0:
-                        moved = True
-                    w[a] = wn
+                rls_gain(pw, psi, r_ay, r_r, q_rate * h, p_max, kg, pk)
+                moved = projected_step(w, kg, nu0, nu1, wlo, whi, dw)
                 if moved:  # x += Upsilon dw, then the innovation at the new (x, w)
                     for r_ in range(2):
                         acc = 0.0

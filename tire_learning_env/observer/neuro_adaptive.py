@@ -38,6 +38,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from ..params import CameraParams, ParameterError, VehicleParams
+from ._rls import projected_step, rls_gain
 from .basis import SoftClipBasis
 from .gains import ObserverGains, discretize
 
@@ -190,43 +191,14 @@ def _predict(x, ups, ff, fr, phi, u0, u1, u2, Ad, Bd, Fd, tmp):
 
 
 @njit(cache=True)
-def _correct(x, w, ups, pw, nu1, nu2, L, law, r_term, q_dt, p_max, mu, wlo, whi, kg, pk, dw):
+def _correct(x, w, ups, pw, nu1, nu2, L, law, r_term, q_dt, p_max, mu, wlo, whi, kg, pk, psi, dw):
     """Frame correction: weights by RLS/gradient with projection, then state and sensitivity."""
     nw = w.shape[0]
+    for a in range(nw):  # Psi = C Upsilon (rows e1 and e2)
+        psi[0, a] = ups[0, a]
+        psi[1, a] = ups[2, a]
     if law == 0:  # recursive least squares, r_term = diag(R)
-        for a in range(nw):
-            t0 = 0.0
-            t1 = 0.0
-            for b in range(nw):
-                t0 += pw[a, b] * ups[0, b]
-                t1 += pw[a, b] * ups[2, b]
-            pk[0, a] = t0  # (P Psi^T)^T
-            pk[1, a] = t1
-        s00 = r_term[0]
-        s01 = 0.0
-        s11 = r_term[1]
-        for a in range(nw):
-            s00 += ups[0, a] * pk[0, a]
-            s01 += ups[0, a] * pk[1, a]
-            s11 += ups[2, a] * pk[1, a]
-        det = s00 * s11 - s01 * s01
-        i00 = s11 / det
-        i01 = -s01 / det
-        i11 = s00 / det
-        for a in range(nw):
-            kg[a, 0] = pk[0, a] * i00 + pk[1, a] * i01
-            kg[a, 1] = pk[0, a] * i01 + pk[1, a] * i11
-        for a in range(nw):  # P <- P - K Psi P + q T I, diagonal capped
-            for b in range(nw):
-                pw[a, b] -= kg[a, 0] * pk[0, b] + kg[a, 1] * pk[1, b]
-        for a in range(nw):
-            pw[a, a] += q_dt
-        for a in range(nw):
-            if pw[a, a] > p_max:
-                sc = math.sqrt(p_max / pw[a, a])
-                for b in range(nw):
-                    pw[a, b] *= sc
-                    pw[b, a] *= sc
+        rls_gain(pw, psi, r_term[0], r_term[1], q_dt, p_max, kg, pk)
     elif law == -1:  # adaptation frozen (settling after a reset)
         for a in range(nw):
             kg[a, 0] = 0.0
@@ -234,18 +206,11 @@ def _correct(x, w, ups, pw, nu1, nu2, L, law, r_term, q_dt, p_max, mu, wlo, whi,
     else:  # normalised gradient, r_term = diag(R^-1)
         norm = 1.0
         for a in range(nw):
-            norm += ups[0, a] * ups[0, a] * r_term[0] + ups[2, a] * ups[2, a] * r_term[1]
+            norm += psi[0, a] * psi[0, a] * r_term[0] + psi[1, a] * psi[1, a] * r_term[1]
         for a in range(nw):
-            kg[a, 0] = mu * ups[0, a] * r_term[0] / norm
-            kg[a, 1] = mu * ups[2, a] * r_term[1] / norm
-    for a in range(nw):  # projection onto the weight box [W_lo, W_hi]
-        wn = w[a] + kg[a, 0] * nu1 + kg[a, 1] * nu2
-        if wn > whi[a]:
-            wn = whi[a]
-        elif wn < wlo[a]:
-            wn = wlo[a]
-        dw[a] = wn - w[a]
-        w[a] = wn
+            kg[a, 0] = mu * psi[0, a] * r_term[0] / norm
+            kg[a, 1] = mu * psi[1, a] * r_term[1] / norm
+    projected_step(w, kg, nu1, nu2, wlo, whi, dw)
     ud0 = 0.0
     ud2 = 0.0
     for r in range(4):  # xi += L nu + (I - L C) Upsilon dw
@@ -289,6 +254,7 @@ def _observer_kernel(
     phi = np.empty(nw)
     kg = np.empty((nw, 2))
     pk = np.empty((2, nw))
+    psi = np.empty((2, nw))
     dw = np.empty(nw)
     tmp = np.empty((4, nw))
     hlen = hist_x.shape[0]
@@ -325,7 +291,7 @@ def _observer_kernel(
                     div_state[2] = j
             else:
                 div_state[0] = 0.0
-            _correct(x, w, ups, pw, nu1, nu2, L, law if settle[0] >= settle[1] else -1, r_term, q_dt, p_max, mu, wlo, whi, kg, pk, dw)
+            _correct(x, w, ups, pw, nu1, nu2, L, law if settle[0] >= settle[1] else -1, r_term, q_dt, p_max, mu, wlo, whi, kg, pk, psi, dw)
             if lat_m > 0 and back > 0:
                 k0 = hist_i[0] - 1 - back
                 for i in range(k0, hist_i[0] - 1):
