@@ -25,7 +25,7 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 from numpy.typing import NDArray
 
-from .params import ParameterError, VehicleParams
+from .params import VehicleParams
 
 __all__ = [
     "LogFormatError",

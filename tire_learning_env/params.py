@@ -46,6 +46,17 @@ def check_keys(cls_name: str, given: Mapping[str, Any], allowed: set[str] | list
         )
 
 
+def coerce_params(cls: type[P], value: Any, name: str) -> P | None:
+    """``value`` as a ``cls`` instance: an instance passes, a mapping goes through
+    :meth:`_Params.from_dict` (unknown keys raise), ``None`` stays ``None``; anything else
+    raises :class:`ParameterError` naming ``name``."""
+    if value is None or isinstance(value, cls):
+        return value
+    if isinstance(value, Mapping):
+        return cls.from_dict(value)
+    raise ParameterError(f"{name} must be a {cls.__name__} or a dict, got {type(value).__name__}")
+
+
 class _Params:
     """Mixin: construction from dict/JSON with strict keys, and field validation helpers."""
 

@@ -6,7 +6,6 @@ variants), :func:`run_study` runs it and writes ``metrics.json`` and the figures
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field, replace

@@ -8,8 +8,6 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from ..params import ParameterError
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(

@@ -45,10 +45,11 @@ from highway_env.vehicle.kinematics import Vehicle as HighwayVehicle
 from .._kernels import CAMC_COUNT, CAMC_HEAD, CAMS_LATEST_E1, CAMS_LATEST_E2, LOG_COLUMNS, N_LOG, bicycle_rhs
 from ..dynamics import BicyclePlant, PlantEffects
 from ..driver import LaneKeepingDriver
-from ..params import CameraParams, DriverParams, ParameterError, TireParams, VehicleParams, check_keys
+from ..params import CameraParams, DriverParams, ParameterError, TireParams, VehicleParams, check_keys, coerce_params
 from ..sensors import Camera
 from ..simulation import SENSOR_KEYS, Plant
 from ..tires import axle_tires
+from .lane_keeping import _PARAM_TYPES
 from .highway_kernel import (
     STOP_BLOWUP,
     STOP_HANDOVER,
@@ -318,24 +319,9 @@ class _ViewerScene:
         pass
 
 
-_PARAM_TYPES = {
-    "vehicle": VehicleParams,
-    "tire": TireParams,
-    "camera": CameraParams,
-    "driver": DriverParams,
-    "effects": PlantEffects,
-}
-
-
 def _as_params(name: str, value: Any):
-    cls = _PARAM_TYPES[name]
-    if value is None:
-        return None
-    if isinstance(value, cls):
-        return value
-    if isinstance(value, Mapping):
-        return cls.from_dict(value)
-    raise ParameterError(f"{name} must be a {cls.__name__} or a dict, got {type(value).__name__}")
+    """The config entry ``name`` as its parameter dataclass, ``None`` when not given."""
+    return coerce_params(_PARAM_TYPES[name], value, name)
 
 
 class _TrafficEnv(gym.Env):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from dataclasses import fields
 from typing import Any, Callable, Mapping
 
 import gymnasium as gym
@@ -20,6 +19,7 @@ from ..params import (
     TireParams,
     VehicleParams,
     check_keys,
+    coerce_params,
 )
 from ..rendering import TopDownRenderer
 from ..roads import Road, make_road
@@ -41,14 +41,9 @@ _PARAM_TYPES = {
 
 
 def _as_params(name: str, value: Any):
+    """The config entry ``name`` as its parameter dataclass (defaults when ``None``)."""
     cls = _PARAM_TYPES[name]
-    if value is None:
-        return cls()
-    if isinstance(value, cls):
-        return value
-    if isinstance(value, Mapping):
-        return cls.from_dict(value)
-    raise ParameterError(f"{name} must be a {cls.__name__} or a dict, got {type(value).__name__}")
+    return coerce_params(cls, value, name) or cls()
 
 
 class LaneKeepingEnv(gym.Env):

@@ -73,7 +73,7 @@ import scipy.linalg as sla
 from numpy.typing import NDArray
 
 from ..dynamics import error_state_matrices, slip_jacobian
-from ..params import CameraParams, ParameterError, VehicleParams
+from ..params import ParameterError, VehicleParams
 from .basis import SoftClipBasis
 
 __all__ = [
