@@ -6,11 +6,13 @@ import argparse
 import math
 from pathlib import Path
 
+from ..discrepancy.truth import DISCREPANCY_ROADS, HIDDEN_EFFECTS, SPEED_PROFILES, parse_hidden_effects, speed_profile
 from ..dynamics import PlantEffects
 from ..io import write_log
 from ..params import CameraParams, ParameterError, TireParams
 from ..roads import BUILTIN_ROADS
 from ..simulation import simulate
+from ..tires import axle_tires
 from ._common import add_vehicle_argument, parse_assignments, vehicle_from_args
 
 #: ``--effect`` names that act on the camera rather than on the vehicle
@@ -24,7 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Closed-loop simulation of the truth vehicle on a road; writes the shared CSV log "
         "with ground-truth columns (true_*).",
     )
-    p.add_argument("--road", default="study1", choices=sorted(BUILTIN_ROADS), help="built-in road (default study1)")
+    p.add_argument("--road", default="study1", choices=sorted(BUILTIN_ROADS) + sorted(DISCREPANCY_ROADS),
+                   help="built-in road (default study1); identification = curves both ways + six lane changes, "
+                   "repeating every 1800 m")
     p.add_argument("--duration", type=float, default=60.0, help="simulated time [s] (default 60)")
     p.add_argument("--tire", choices=["pacejka", "linear"], default="pacejka", help="truth tire model")
     p.add_argument("--mu", type=float, default=TireParams().mu, help="Pacejka friction coefficient")
@@ -36,9 +40,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--e1-noise", type=float, default=0.01, help="e1 noise half-width/std [m]")
     p.add_argument("--e2-noise", type=float, default=math.radians(0.1), help="e2 noise half-width/std [rad]")
     p.add_argument("--effect", action="append", metavar="NAME=VALUE",
-                   help="hidden physical effect (repeatable); vehicle effects: "
-                   + ", ".join(f.name for f in PlantEffects.__dataclass_fields__.values())
-                   + "; camera effects: " + ", ".join(CAMERA_EFFECTS))
+                   help="hidden physical effect in the truth model (repeatable): "
+                   + "; ".join(f"{k} [{v[2]}]" for k, v in HIDDEN_EFFECTS.items())
+                   + ". PlantEffects field names (" + ", ".join(PlantEffects.__dataclass_fields__)
+                   + ") and camera_latency / e1_bias / e2_bias also work")
+    p.add_argument("--speed-profile", choices=sorted(SPEED_PROFILES), default="constant",
+                   help="speed over time (v0 = the vehicle's vx): " + "; ".join(f"{k}: {v}" for k, v in SPEED_PROFILES.items()))
     p.add_argument("--seed", type=int, default=0, help="noise seed")
     p.add_argument("--no-truth", action="store_true", help="omit the true_* columns")
     p.add_argument("--out", type=Path, required=True, help="output CSV")
@@ -48,12 +55,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     vehicle = vehicle_from_args(args)
-    effects = parse_assignments(args.effect, "--effect")
-    camera_kwargs = {}
-    for name in list(effects):
-        if name in CAMERA_EFFECTS:
-            camera_kwargs[CAMERA_EFFECTS[name]] = effects.pop(name)
-    plant_effects = PlantEffects.from_dict(effects)
+    hidden = parse_hidden_effects(parse_assignments(args.effect, "--effect"))
+    camera_kwargs = dict(hidden.camera)
     if args.noise == "paper":
         camera = CameraParams.paper_noise(rate=args.camera_rate, **camera_kwargs)
     elif args.noise == "none":
@@ -63,8 +66,10 @@ def run(args: argparse.Namespace) -> int:
                               e2_noise=args.e2_noise, **camera_kwargs)
     if not args.log_rate > 0 or args.log_rate > args.physics_rate:
         raise ParameterError("--log-rate must be > 0 and at most --physics-rate")
-    log = simulate(args.road, args.duration, vehicle=vehicle, tire_model=args.tire, tire=TireParams(mu=args.mu),
-                   camera=camera, effects=plant_effects, physics_rate=args.physics_rate, seed=args.seed)
+    road = DISCREPANCY_ROADS[args.road]() if args.road in DISCREPANCY_ROADS else args.road
+    plant = hidden.make_plant(vehicle, *axle_tires(vehicle, args.tire, TireParams(mu=args.mu)))
+    log = simulate(road, args.duration, vehicle=vehicle, camera=camera, physics_rate=args.physics_rate,
+                   seed=args.seed, speed_profile=speed_profile(args.speed_profile, vehicle.vx), plant=plant)
     cols = log.to_columns(include_truth=not args.no_truth)
     step = max(int(round(args.physics_rate / args.log_rate)), 1)
     keep = _rows_to_keep(cols["e1"], step)

@@ -1,0 +1,428 @@
+"""The discrepancy workflow: compare, locate, name, add and show.
+
+:func:`analyze` takes a driving log (:class:`~tire_learning_env.io.DrivingLog`, only its
+``sensors`` are read), a nominal vehicle and a tire choice, and returns a
+:class:`DiscrepancyResult` whose :meth:`~DiscrepancyResult.to_json` is ``report.json``.
+
+Verdict rules (``config`` = :class:`.config.DiscrepancyConfig`):
+
+- ``found``: at least one candidate effect passed the selection criterion
+  (:mod:`.selection`) *and* the residual of the model with the accepted effects is white
+  (camera portmanteau test, p >= ``whiteness_alpha``);
+- ``none``: no candidate passed and the nominal residual is white: the nominal model
+  explains the data within the noise;
+- ``unexplained``: a structured residual remains (not white) that the accepted effects,
+  if any, do not remove. Effects accepted on the way are then listed as
+  ``partial_effects``, never as the answer.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..io import DrivingLog
+from ..params import CameraParams, ParameterError, TireParams, VehicleParams
+from ..tires import CallableTire, LinearTire, TireModel, axle_tires
+from ._model import CHANNELS
+from .config import DiscrepancyConfig
+from .data import ModelData, noise_std, prepare
+from .diagnostics import (
+    GapSummary,
+    WhitenessTest,
+    cross_correlation,
+    gap,
+    locate_windows,
+    regimes,
+    whiteness,
+)
+from .effects import LIBRARY, CandidateEffect
+from .residuals import Evaluation, ResidualModel
+from .selection import SelectionResult, acceptance_threshold, forward_selection
+
+__all__ = ["TIRE_CHOICES", "VERDICT_RULES", "DiscrepancyResult", "analyze", "nominal_tires"]
+
+#: the verdict rules in plain words (also written to report.json)
+VERDICT_RULES = (
+    "found: at least one candidate effect passed the selection criterion and the residual of the model with the "
+    "accepted effects is white (camera portmanteau test, p >= whiteness_alpha). none: no candidate passed and the "
+    "nominal residual is white: the nominal model explains the data within the noise. unexplained: a structured "
+    "residual remains that the accepted effects, if any, do not remove; effects accepted on the way are then listed "
+    "as partial_effects, never as the answer."
+)
+
+TIRE_CHOICES = ("pacejka", "linear", "learned")
+
+#: effect pairs that e1/e2 alone cannot tell apart (the IMU can)
+_EQUIVALENT_WITHOUT_IMU = {frozenset({"road_bank", "crosswind"})}
+
+
+def nominal_tires(
+    log: DrivingLog, vehicle: VehicleParams, tire: str, tire_params: TireParams | None = None
+) -> tuple[TireModel, TireModel, dict]:
+    """Front/rear axle tires of the nominal model and a description.
+
+    ``learned`` runs the neuro-adaptive observer on the log (:func:`~tire_learning_env.observer.estimate`)
+    and uses the learned axle curves.
+    """
+    if tire == "linear":
+        return LinearTire(2.0 * vehicle.Cf), LinearTire(2.0 * vehicle.Cr), {"kind": "linear"}
+    if tire == "pacejka":
+        tp = tire_params or TireParams()
+        f, r = axle_tires(vehicle, "pacejka", tp)
+        return f, r, {"kind": "pacejka", "mu": tp.mu, "shape": tp.shape, "curvature": tp.curvature}
+    if tire == "learned":
+        from ..observer import ObserverConfig, estimate
+
+        s = log.sensors
+        t = s["t"]
+        kappa = np.nan_to_num(s["kappa"])
+        pdd = s["vx"] * kappa
+        rows = {
+            "t": t, "delta": s["delta"], "vx": s["vx"], "psi_dot_des": pdd,
+            "psi_ddot_des": np.gradient(pdd, t), "e1": s["e1"], "e2": s["e2"],
+        }  # fmt: skip
+        frames = np.flatnonzero(np.isfinite(s["e1"]) & np.isfinite(s["e2"]))
+        rate = 1.0 / float(np.median(np.diff(t[frames])))
+        # gains designed for the camera noise estimated from the log itself
+        n1, n2 = noise_std(s["e1"][frames]), noise_std(s["e2"][frames])
+        camera = CameraParams(rate=rate)
+        if n1 > 0 and n2 > 0:
+            camera = CameraParams(rate=rate, noise="gaussian", e1_noise=n1, e2_noise=n2)
+        result = estimate(rows, vehicle, camera, ObserverConfig(), physics_dt=float(np.median(np.diff(t))))
+        cf, cr = result.cornering_stiffness()
+        front = CallableTire(lambda a: result.axle_force(a, "front"), "learned front")
+        rear = CallableTire(lambda a: result.axle_force(a, "rear"), "learned rear")
+        return front, rear, {"kind": "learned", "cornering_stiffness_per_tire": {"front": cf, "rear": cr}}
+    raise ParameterError(f"tire must be one of {TIRE_CHOICES}, got {tire!r}")
+
+
+@dataclass
+class DiscrepancyResult:
+    """Everything the workflow found (see :meth:`to_json` for the ``report.json`` layout)."""
+
+    verdict: str
+    effects: list[dict]
+    partial_effects: list[dict]
+    gap_before: GapSummary
+    gap_after: GapSummary
+    gap_after_partial: GapSummary | None
+    whiteness_before: WhitenessTest
+    whiteness_after: WhitenessTest
+    selection: SelectionResult
+    data: ModelData
+    model: ResidualModel
+    nominal: Evaluation
+    final: Evaluation
+    trajectories_before: NDArray
+    trajectories_after: NDArray
+    windows_before: list[dict]
+    windows_after: list[dict]
+    regimes_before: dict
+    regimes_after: dict
+    cross_correlation_before: dict
+    cross_correlation_after: dict
+    tire: dict
+    vehicle: VehicleParams
+    config: DiscrepancyConfig
+    source: str
+    runtime_s: float
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def gap_ratio(self) -> float:
+        """Noise-normalised band RMS over all channels, before / after."""
+        return _ratio(self.gap_before.normalised_band_rms["all"], self.gap_after.normalised_band_rms["all"])
+
+    def gap_ratios(self) -> dict:
+        """Ratios per channel: band RMS, raw RMS, and the normalised camera / all figures."""
+        b, a = self.gap_before, self.gap_after
+        out = {
+            "band": {k: _ratio(b.band_rms[k], a.band_rms[k]) for k in b.band_rms},
+            "raw": {k: _ratio(b.rms[k], a.rms[k]) for k in b.rms},
+            "normalised_band": {
+                k: _ratio(b.normalised_band_rms[k], a.normalised_band_rms[k]) for k in ("camera", "all")
+            },
+        }
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``report.json`` document."""
+        cfg = self.config
+        d = self.data
+        sel = self.selection
+        rounds = []
+        for st in sel.steps:
+            rounds.append(
+                {
+                    "round": st.round,
+                    "chi2_before": st.chi2_before,
+                    "accepted": st.accepted,
+                    "dropped": st.dropped,
+                    "candidates": st.tried,
+                }
+            )
+        return {
+            "verdict": self.verdict,
+            "effects": self.effects,
+            "gap_before": self.gap_before.to_dict(),
+            "gap_after": self.gap_after.to_dict(),
+            "gap_ratio": self.gap_ratio,
+            "gap_ratios": self.gap_ratios(),
+            "partial_effects": self.partial_effects,
+            "gap_after_partial": None if self.gap_after_partial is None else self.gap_after_partial.to_dict(),
+            "comparison": {
+                "method": "multiple-shooting output error",
+                "description": (
+                    f"The log is cut into windows of about {cfg.window:g} s; in each the model runs open loop on the "
+                    f"logged delta, vx and kappa from an initial state fitted to that window's own measurements "
+                    f"(simulation starts {cfg.preroll:g} s before the window's first measurement); the residual is "
+                    "measurement minus simulation, weighted by each channel's noise level. The gap is its RMS, raw "
+                    "and in the vehicle-dynamics band (0.5 s centred moving average within each window)."
+                ),
+                "window_s": cfg.window,
+                "preroll_s": cfg.preroll,
+                "windows": d.n_windows,
+                "measurements": d.n_measurements,
+                "channels": list(d.channels),
+                "noise_sigma": {c: float(d.sigma[i]) for i, c in enumerate(CHANNELS) if c in d.channels},
+                "noise_sigma_estimated": {
+                    c: float(d.sigma_estimated[i]) for i, c in enumerate(CHANNELS) if c in d.channels
+                },
+                "steering_between_rows": cfg.steering,
+            },
+            "nominal_model": {"vehicle": self.vehicle.to_dict(), "tire": self.tire},
+            "log": {
+                "source": self.source,
+                "rows": int(len(d.t)),
+                "duration_s": float(d.t[-1] - d.t[0]),
+                "speed_variation": d.speed_variation,
+                "notes": d.notes,
+            },
+            "selection": {
+                "criterion": (
+                    "chi2 = sum(((y - y_model)/sigma)^2) with the noise levels fixed; accept the best candidate of a "
+                    f"round if its likelihood-ratio p-value < {cfg.alpha:g} / (candidates in the round) and it lowers "
+                    "BIC = chi2 + k ln(n); refit all accepted effects jointly; drop any that is no longer significant; "
+                    f"stop when none passes or {cfg.max_effects} are in. Candidates whose score (predicted chi2 "
+                    "reduction) is below a quarter of the acceptance threshold are reported but not fitted."
+                ),
+                "n_measurements": d.n_measurements,
+                "rounds": rounds,
+                "evaluations": sel.n_evaluations,
+            },
+            "whiteness": {"before": self.whiteness_before.to_dict(), "after": self.whiteness_after.to_dict(),
+                          "alpha": cfg.whiteness_alpha},  # fmt: skip
+            "locate": {
+                "windows_before": self.windows_before,
+                "windows_after": self.windows_after,
+                "regimes_before": self.regimes_before,
+                "regimes_after": self.regimes_after,
+                "cross_correlation_before": self.cross_correlation_before,
+                "cross_correlation_after": self.cross_correlation_after,
+            },
+            "library": [
+                {"name": e.name, "parameters": e.units_dict(), "description": e.description} for e in LIBRARY
+            ],
+            "verdict_rules": VERDICT_RULES,
+            "config": cfg.to_dict(),
+            "runtime_s": self.runtime_s,
+            "notes": self.notes,
+        }
+
+
+def _ratio(before: float, after: float) -> float:
+    if after <= 0:
+        return math.inf if before > 0 else 1.0
+    return float(before / after)
+
+
+def _effect_entry(
+    effect: CandidateEffect, values: NDArray, stderr: NDArray, evidence: dict, channels: tuple[str, ...]
+) -> dict:
+    entry = {
+        "name": effect.name,
+        "parameters": effect.as_dict(values),
+        "units": effect.units_dict(),
+        "standard_errors": effect.as_dict(stderr),
+        "description": effect.description,
+        "evidence": evidence,
+    }
+    if "yaw_rate" not in channels and "ay" not in channels:
+        for pair in _EQUIVALENT_WITHOUT_IMU:
+            if effect.name in pair:
+                other = next(iter(pair - {effect.name}))
+                entry["evidence"]["indistinguishable_from"] = other
+                entry["evidence"]["note"] = (
+                    f"without IMU channels {effect.name} and {other} act identically on e1/e2 (a constant lateral "
+                    "force); the accelerometer would tell them apart"
+                )
+    return entry
+
+
+def analyze(
+    log: DrivingLog,
+    vehicle: VehicleParams | None = None,
+    tire: str = "pacejka",
+    config: DiscrepancyConfig | None = None,
+    progress: bool | None = None,
+    tire_params: TireParams | None = None,
+) -> DiscrepancyResult:
+    """Run the whole workflow on a camera log.
+
+    Parameters
+    ----------
+    log : DrivingLog
+        Driving log (only ``log.sensors`` is read).
+    vehicle : VehicleParams, optional
+        Nominal vehicle (default: the paper's sedan).
+    tire : {"pacejka", "linear", "learned"}
+        Nominal tire model.
+    config : DiscrepancyConfig, optional
+    progress : bool, optional
+        Show a tqdm progress bar (default: when attached to a terminal).
+    tire_params : TireParams, optional
+        Magic Formula shape of the nominal Pacejka tire.
+
+    Returns
+    -------
+    DiscrepancyResult
+    """
+    from tqdm import tqdm
+
+    t_start = time.perf_counter()
+    config = config or DiscrepancyConfig()
+    vehicle = vehicle or VehicleParams()
+    if tire not in TIRE_CHOICES:
+        raise ParameterError(f"tire must be one of {TIRE_CHOICES}, got {tire!r}")
+    data = prepare(log, config)
+    notes: list[str] = []
+    candidates = [c for c in LIBRARY if not c.needs_speed_variation or data.speed_variation >= config.speed_variation]
+    skipped = [c.name for c in LIBRARY if c not in candidates]
+    if skipped:
+        notes.append(
+            f"{skipped} not tried: the speed varies by only {100 * data.speed_variation:.1f} % "
+            f"(needs {100 * config.speed_variation:.0f} %)"
+        )
+    disable = None if progress is None else not progress  # None: only on a terminal
+    bar = tqdm(total=len(candidates) + 4, desc="discrepancy", unit="step", disable=disable)
+    try:
+        bar.set_postfix_str("nominal tire")
+        front, rear, tire_info = nominal_tires(log, vehicle, tire, tire_params)
+        model = ResidualModel(data, vehicle, front, rear, config)
+        bar.update(1)
+
+        def tick(name: str) -> None:
+            # the number of rounds is not known in advance: grow the total as they come
+            if bar.n >= bar.total - 2:
+                bar.total += len(candidates)
+            bar.set_postfix_str(name)
+            bar.update(1)
+
+        bar.set_postfix_str("selection")
+        sel = forward_selection(model, candidates, config.alpha, config.max_effects, progress=tick)
+        bar.set_postfix_str("whiteness")
+        rng = np.random.default_rng(config.seed)
+        lag_span = config.whiteness_lags
+        w_before = whiteness(data, sel.nominal, lag_span, config.mc_draws, rng)
+        w_final = whiteness(data, sel.final, lag_span, config.mc_draws, rng) if sel.accepted else w_before
+        bar.update(1)
+        bar.set_postfix_str("locate")
+        traj_before = model.trajectories(sel.nominal)
+        traj_after = model.trajectories(sel.final) if sel.accepted else traj_before
+        gap_before = gap(data, sel.nominal)
+        gap_final = gap(data, sel.final)
+        n = data.n_measurements
+        white_final = w_final.p_value >= config.whiteness_alpha
+        entries = []
+        for e, values, stderr in sel.accepted:
+            ev = _evidence(sel, e, n, config)
+            entries.append(_effect_entry(e, values, stderr, ev, data.channels))
+        if sel.accepted and white_final:
+            verdict, effects, partial = "found", entries, []
+            gap_after, gap_partial, final = gap_final, None, sel.final
+        elif sel.accepted:
+            verdict, effects, partial = "unexplained", [], entries
+            gap_after, gap_partial, final = gap_before, gap_final, sel.nominal
+            notes.append(
+                "effects were accepted on the way but the residual is still structured (whiteness p = "
+                f"{w_final.p_value:.3g}); they explain part of the gap only and are listed as partial_effects"
+            )
+        elif w_before.p_value >= config.whiteness_alpha:
+            verdict, effects, partial = "none", [], []
+            gap_after, gap_partial, final = gap_before, None, sel.nominal
+        else:
+            verdict, effects, partial = "unexplained", [], []
+            gap_after, gap_partial, final = gap_before, None, sel.nominal
+            notes.append(
+                f"the nominal residual is structured (whiteness p = {w_before.p_value:.3g}) but no candidate "
+                "effect explains it significantly"
+            )
+        result = DiscrepancyResult(
+            verdict=verdict,
+            effects=effects,
+            partial_effects=partial,
+            gap_before=gap_before,
+            gap_after=gap_after,
+            gap_after_partial=gap_partial,
+            whiteness_before=w_before,
+            whiteness_after=w_final if verdict == "found" else w_before if verdict == "none" else w_final,
+            selection=sel,
+            data=data,
+            model=model,
+            nominal=sel.nominal,
+            final=final,
+            trajectories_before=traj_before,
+            trajectories_after=traj_after if verdict == "found" else traj_before,
+            windows_before=locate_windows(data, sel.nominal),
+            windows_after=locate_windows(data, final),
+            regimes_before=regimes(data, sel.nominal, traj_before),
+            regimes_after=regimes(data, final, traj_after if verdict == "found" else traj_before),
+            cross_correlation_before=cross_correlation(data, sel.nominal),
+            cross_correlation_after=cross_correlation(data, final),
+            tire=tire_info,
+            vehicle=vehicle,
+            config=config,
+            source=log.source,
+            runtime_s=0.0,
+            notes=notes,
+        )
+        bar.update(1)
+    finally:
+        bar.close()
+    result.runtime_s = time.perf_counter() - t_start
+    return result
+
+
+def _evidence(sel: SelectionResult, effect: CandidateEffect, n: int, config: DiscrepancyConfig) -> dict:
+    """Why ``effect`` was accepted: its round's statistics and the runner-up."""
+    for st in sel.steps:
+        if st.accepted == effect.name:
+            info = st.tried[effect.name]
+            k = effect.n_parameters
+            fitted = {name: v for name, v in st.tried.items() if v.get("fitted") and name != effect.name}
+            runner = min(fitted, key=lambda nm: fitted[nm]["chi2"]) if fitted else None
+            out = {
+                "round": st.round,
+                "chi2_before": st.chi2_before,
+                "chi2_with_effect": info["chi2"],
+                "likelihood_ratio": info["lr"],
+                "p_value": info["p_value"],
+                "delta_bic": info["delta_bic"],
+                "acceptance_threshold": acceptance_threshold(k, n, config.alpha / len(st.tried)),
+                "runner_up": None,
+            }
+            if runner is not None:
+                out["runner_up"] = {
+                    "name": runner,
+                    "chi2": fitted[runner]["chi2"],
+                    "delta_bic_vs_accepted": (fitted[runner]["chi2"] + fitted[runner]["k"] * math.log(n))
+                    - (info["chi2"] + k * math.log(n)),
+                }
+            return out
+    return {}
