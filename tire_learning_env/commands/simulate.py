@@ -15,10 +15,6 @@ from ..simulation import simulate
 from ..tires import axle_tires
 from ._common import add_vehicle_argument, parse_assignments, vehicle_from_args
 
-#: ``--effect`` names that act on the camera rather than on the vehicle
-CAMERA_EFFECTS = {"camera_latency": "latency", "camera_heading_bias": "e2_bias", "camera_offset_bias": "e1_bias"}
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "simulate",
