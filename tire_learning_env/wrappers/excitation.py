@@ -46,8 +46,8 @@ one at the limit):
 - departure: ``departure_penalty`` once, when the car leaves the lane (the base env
   terminates the episode).
 
-The quadratic ramp lets a policy use the last tenth of a limit at a small price; the
-step penalty beyond it is larger than any information a step can bring.
+The quadratic ramp lets a policy use the last tenth of a limit at a growing price; the
+step penalty beyond it is larger than the information of fifty late-episode steps.
 
 The **fixed target slip range** defaults to the slip the nominal linear bicycle model
 needs for steady cornering at the lateral-acceleration limit,
@@ -70,7 +70,7 @@ the car must learn is unknown, and held-out seeds are held-out tires.
 >>> obs.shape == env.observation_space.shape
 True
 >>> for k in range(100):
-...     obs, reward, terminated, truncated, info = env.step(np.array([np.sin(0.2 * k)], dtype=np.float32))
+...     obs, reward, terminated, truncated, info = env.step(np.array([0.3 * np.sin(0.2 * k)], dtype=np.float32))
 >>> bool(info["excitation"]["information"] > info["excitation"]["information_initial"])
 True
 """
@@ -211,10 +211,10 @@ class ExcitationConfig(_Params):
     information_measure: str = "logdet"
     information_scale: float = 10.0  # [1/nat]
     truth_scale: float = 100.0  # [-]
-    ay_penalty: float = 0.1
-    lane_penalty: float = 0.1
-    violation_penalty: float = 2.0
-    steering_rate_penalty: float = 0.01
+    ay_penalty: float = 1.0
+    lane_penalty: float = 1.0
+    violation_penalty: float = 10.0
+    steering_rate_penalty: float = 0.02
     departure_penalty: float = 100.0
     episode_time: float = 60.0  # [s]
     target_slip_front: float = 0.0  # [rad]
@@ -356,7 +356,14 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     ``info["excitation"]``: ``information``, ``information_initial``, ``reward_information``,
     ``penalty_ay``, ``penalty_lane``, ``penalty_steering_rate``, ``penalty_departure``,
     ``max_abs_ay``, ``steering_rate``, ``e1_hat`` and (scoring only) ``true_max_abs_e1``;
-    ``info["truth_draw"]`` at reset when the truth is randomised.
+    ``info["truth_draw"]`` at reset when the truth is randomised. The base env's per-tick
+    ``sensor_log``/``truth_log`` are passed on only with ``info_logs=True``: they are large
+    (50 rows per step), and gymnasium's determinism check compares infos with
+    ``np.allclose``, for which the logs' NaN "no frame" rows never equal themselves.
+
+    ## Version History
+
+    * v0: initial release (``TireLearning-Excitation-v0``, ``TireLearning-HighwayExcitation-v0``).
 
     Parameters
     ----------
@@ -365,9 +372,12 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     config : ExcitationConfig or dict, optional
     randomization : TruthRandomization or dict, optional
         Per-episode truth tires (``None``: the env's own fixed truth). Needs a base env
-        with a :class:`~tire_learning_env.dynamics.BicyclePlant` run by a ``Simulator``.
+        that reads its truth through a ``plant`` attribute (and ``sim.plant`` if it has a
+        :class:`~tire_learning_env.simulation.Simulator`), as both base envs do.
     record : bool
         Keep per-step records for :meth:`episode_metrics` (weights, slips, limits).
+    info_logs : bool
+        Pass the base env's per-tick ``sensor_log`` and ``truth_log`` on in ``info``.
     """
 
     def __init__(
@@ -376,8 +386,11 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         config: ExcitationConfig | Mapping | None = None,
         randomization: TruthRandomization | Mapping | None = None,
         record: bool = True,
+        info_logs: bool = False,
     ) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, config=config, randomization=randomization, record=record)
+        gym.utils.RecordConstructorArgs.__init__(
+            self, config=config, randomization=randomization, record=record, info_logs=info_logs
+        )
         gym.Wrapper.__init__(self, env)
         if not isinstance(env, EstimatorWrapper):
             raise TypeError(
@@ -389,14 +402,13 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             None if randomization is None else _as(TruthRandomization, randomization, "randomization")
         )
         self.record = bool(record)
+        self.info_logs = bool(info_logs)
         self.estimator: EstimatorWrapper = env
         self.observer = env.observer
         base = env.unwrapped
         self.vehicle: VehicleParams = self.observer.vehicle
-        if self.randomization is not None and not (hasattr(base, "plant") and hasattr(base, "sim")):
-            raise TypeError(
-                f"{type(base).__name__} does not expose plant and sim; truth randomisation needs a LaneKeepingEnv-like env"
-            )
+        if self.randomization is not None and not hasattr(base, "plant"):
+            raise TypeError(f"{type(base).__name__} does not expose its truth plant; truth randomisation needs one")
         self.target: tuple[float, float] = self.config.target(self.vehicle)
         self.target_indices = target_weight_indices(self.observer.basis, self.target)
         self.dt_policy = 1.0 / float(getattr(base, "policy_rate", 20.0))
@@ -445,8 +457,9 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             self.truth_draw = self.randomization.draw(self._truth_rng)
             base = self.env.unwrapped
             plant = self.randomization.build_plant(self.vehicle, self.truth_draw, getattr(base.plant, "effects", None))
-            base.plant = plant  # the env reads its truth through these two references
-            base.sim.plant = plant
+            base.plant = plant  # the env reads its truth through this reference (and its Simulator's)
+            if hasattr(base, "sim"):
+                base.sim.plant = plant
         obs, info = self.env.reset(seed=seed, options=options)
         self._p0_diag = np.diag(self.observer.pw)[self.target_indices].copy()
         self._j0 = self._j = self.information()
@@ -524,6 +537,9 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         }
         if self.record:
             self._records(info, ay_max, rate, true_e1, reward)
+        if not self.info_logs:
+            info.pop("sensor_log", None)
+            info.pop("truth_log", None)
         return self._observation(est), reward, terminated, truncated, info
 
     def _limit_penalty(self, x: float, weight: float) -> float:
@@ -665,6 +681,7 @@ def make_excitation_env(
     observer_config: ObserverConfig | None = None,
     record: bool = True,
     keep_history: bool = False,
+    info_logs: bool = False,
     **env_kwargs: Any,
 ) -> ExcitationWrapper:
     """``LaneKeepingEnv`` -> :class:`EstimatorWrapper` -> :class:`ExcitationWrapper` (``TireLearning-Excitation-v0``).
@@ -681,6 +698,8 @@ def make_excitation_env(
         Keep per-step records for :meth:`ExcitationWrapper.episode_metrics`.
     keep_history : bool
         Let the :class:`EstimatorWrapper` keep per-tick traces (memory; off for training).
+    info_logs : bool
+        Pass the per-tick ``sensor_log``/``truth_log`` on in ``info``.
     **env_kwargs
         :class:`~tire_learning_env.envs.LaneKeepingEnv` arguments; defaults here:
         ``road="straight"``, ``camera=EXCITATION_CAMERA``, and ``max_steering_offset``
@@ -694,26 +713,32 @@ def make_excitation_env(
     base = LaneKeepingEnv(**kwargs)
     rnd = TruthRandomization() if randomization is True else (None if randomization is False else randomization)
     est = EstimatorWrapper(base, config=observer_config, keep_history=keep_history)
-    return ExcitationWrapper(est, config=cfg, randomization=rnd, record=record)
+    return ExcitationWrapper(est, config=cfg, randomization=rnd, record=record, info_logs=info_logs)
 
 
 def make_highway_excitation_env(
     config: ExcitationConfig | Mapping | None = None,
+    randomization: TruthRandomization | Mapping | bool | None = True,
     observer_config: ObserverConfig | None = None,
     record: bool = True,
     keep_history: bool = False,
+    info_logs: bool = False,
     **env_kwargs: Any,
 ) -> ExcitationWrapper:
-    """``HighwayTrafficEnv`` -> :class:`EstimatorWrapper` -> :class:`ExcitationWrapper`.
+    """``HighwayTrafficEnv`` -> :class:`EstimatorWrapper` -> :class:`ExcitationWrapper` (``TireLearning-HighwayExcitation-v0``).
 
-    The traffic env keeps its own (fixed) truth tire: truth randomisation is not applied.
-    Defaults: ``camera=EXCITATION_CAMERA`` and ``max_steering_offset`` from ``config``.
+    The ego car weaves in its lane among highway-env traffic. Defaults:
+    ``camera=EXCITATION_CAMERA``, ``lane_change="off"`` (a lane change moves the
+    reference by a lane width, which the lane penalty would read as a departure),
+    ``max_steering_offset`` from ``config``; other arguments as
+    :func:`make_excitation_env` and :class:`~tire_learning_env.envs.highway.HighwayTrafficEnv`.
     """
     from ..envs.highway import HighwayTrafficEnv
 
     cfg = _as(ExcitationConfig, config, "config")
-    kwargs = {"camera": EXCITATION_CAMERA, **env_kwargs}
+    kwargs = {"camera": EXCITATION_CAMERA, "lane_change": "off", **env_kwargs}
     kwargs["max_steering_offset"] = cfg.max_steering_offset
     base = HighwayTrafficEnv(**kwargs)
+    rnd = TruthRandomization() if randomization is True else (None if randomization is False else randomization)
     est = EstimatorWrapper(base, config=observer_config, keep_history=keep_history)
-    return ExcitationWrapper(est, config=cfg, randomization=None, record=record)
+    return ExcitationWrapper(est, config=cfg, randomization=rnd, record=record, info_logs=info_logs)
