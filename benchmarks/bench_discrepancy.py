@@ -15,8 +15,16 @@ Suites (``--suite``, default ``speed``):
 - ``clean``: verdict on effect-free logs over ``--seeds`` noise seeds (target: ``none``
   in at least 19 of 20).
 - ``robustness``: every library effect over ``--robustness-seeds`` other noise seeds.
+- ``imu``: IMU-only logs (body-frame model, IMU library): every IMU library effect hidden at a
+  realistic size in a 90 s race-car drive (:mod:`tire_learning_env.discrepancy.imu_truth`,
+  Revs-like vehicle, Pacejka mu = 1.4, IMU noise of the Revs log's size), two-effect cases, an
+  out-of-library effect (combined slip), and ``--seeds`` clean logs.
+- ``imu_real``: the real Revs Ferrari 250 LM log (``../shared/data``), whole file and its two
+  halves, with the learned and the linear nominal tire: verdict, partial effects, gap, runtime
+  (target: the whole 275 s log in <= 140 s on 2 cores).
 
 Run: ``python benchmarks/bench_discrepancy.py --suite all --seeds 20``
+(``all`` = the camera suites; the IMU suites are run by name: ``--suite imu`` / ``--suite imu_real``.)
 """
 
 from __future__ import annotations
@@ -270,9 +278,188 @@ def suite_speed() -> dict:
     }
 
 
+# ------------------------------------------------------------------------------------------- IMU logs
+IMU_CASES = {
+    "tire_relaxation": ({"tire_relaxation": 0.5}, {"tire_relaxation": [0.5]}),
+    "cornering_stiffness_scale (front 0.85)": (
+        {"cornering_stiffness_scale_front": 0.85}, {"cornering_stiffness_scale": [0.85, 1.0]},
+    ),  # fmt: skip
+    "longitudinal_load_transfer": ({"longitudinal_load_transfer": 0.35}, {"longitudinal_load_transfer": [0.35]}),
+    "lateral_load_transfer": (
+        {"lateral_load_transfer_front": 0.12, "lateral_load_transfer_rear": 0.06}, {"lateral_load_transfer": [0.12, 0.06]},
+    ),  # fmt: skip
+    "steering_offset": ({"steering_offset": 0.002}, {"steering_offset": [0.002]}),
+    "steering_compliance": ({"steering_compliance": 1e-6}, {"steering_compliance": [1e-6]}),
+    "steering_ratio_nonlinearity": ({"steering_ratio_nonlinearity": 0.1}, {"steering_ratio_nonlinearity": [0.1]}),
+    "steering_delay": ({"steering_delay": 0.03}, {"steering_delay": [0.03]}),
+    "yaw_rate_bias": ({"yaw_rate_bias": 0.005}, {"yaw_rate_bias": [0.005]}),
+    "ay_bias": ({"ay_bias": 0.2}, {"ay_bias": [0.2]}),
+    "ay_scale": ({"ay_scale": 0.03}, {"ay_scale": [0.03]}),
+    "road_bank": ({"road_bank": 0.02}, {"road_bank": [0.02]}),
+    "accelerometer_offset": ({"accelerometer_offset": 1.0}, {"accelerometer_offset": [1.0]}),
+    "yaw_inertia_scale": ({"yaw_inertia_scale": 1.25}, {"yaw_inertia_scale": [1.25]}),
+    "speed_dependent_stiffness": ({"speed_dependent_stiffness": -5e-5}, {"speed_dependent_stiffness": [-5e-5]}),
+}
+IMU_TWO_EFFECT_CASES = {
+    "longitudinal_load_transfer + ay_bias": (
+        {"longitudinal_load_transfer": 0.35, "ay_bias": 0.2}, {"longitudinal_load_transfer": [0.35], "ay_bias": [0.2]},
+    ),  # fmt: skip
+    "tire_relaxation + yaw_rate_bias": (
+        {"tire_relaxation": 0.5, "yaw_rate_bias": 0.005}, {"tire_relaxation": [0.5], "yaw_rate_bias": [0.005]},
+    ),  # fmt: skip
+    "yaw_inertia_scale + steering_delay": (
+        {"yaw_inertia_scale": 1.25, "steering_delay": 0.03}, {"yaw_inertia_scale": [1.25], "steering_delay": [0.03]},
+    ),  # fmt: skip
+}
+IMU_OUT_OF_LIBRARY = {"combined_slip (friction ellipse, mu_x = 1.3)": {"combined_slip": 1.3}}
+
+
+def make_imu_log(effects: dict, seed: int = 1, duration: float = 90.0):
+    from tire_learning_env.discrepancy.imu_truth import simulate_hidden_imu
+
+    cols = simulate_hidden_imu(effects, duration=duration, seed=seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "imu.csv"
+        write_log(path, cols)
+        return read_log(path)
+
+
+def analyze_imu(log):
+    from tire_learning_env.discrepancy.imu_truth import REVS_LIKE_VEHICLE
+    from tire_learning_env.params import TireParams
+
+    return analyze(log, REVS_LIKE_VEHICLE, "pacejka", progress=False, tire_params=TireParams(mu=1.4))
+
+
+def imu_parameter_errors(result, truth: dict) -> dict:
+    found = {e["name"]: e for e in result.effects}
+    out = {}
+    for name, values in truth.items():
+        eff = get_effect(name, "imu")
+        if name not in found:
+            out[name] = None
+            continue
+        true_dev = eff.size(values)
+        fit_dev = eff.size([found[name]["parameters"][p] for p in eff.parameters])
+        ref = np.max(np.abs(true_dev))
+        out[name] = {p: float(100.0 * abs(f - t) / (abs(t) if t != 0 else ref))
+                     for p, t, f in zip(eff.parameters, true_dev, fit_dev)}  # fmt: skip
+    return out
+
+
+def score_imu(result, truth: dict, expected: str = "found") -> dict:
+    names = sorted(e["name"] for e in result.effects)
+    errors = imu_parameter_errors(result, truth) if truth else {}
+    worst = max((v for e in errors.values() if e for v in e.values()), default=None)
+    ratios = result.gap_ratios()
+    return {
+        "verdict": result.verdict,
+        "named": names,
+        "partial": sorted(e["name"] for e in result.partial_effects),
+        "correct": result.verdict == expected and names == sorted(truth),
+        "parameters": {e["name"]: e["parameters"] for e in result.effects},
+        "parameter_error_pct": errors,
+        "worst_parameter_error_pct": worst,
+        "gap_ratio_all_channels": round(result.gap_ratio, 3),
+        "gap_ratio_band": {k: round(v, 3) for k, v in ratios["band"].items()},
+        "gap_ratio_raw": {k: round(v, 3) for k, v in ratios["raw"].items()},
+        "whiteness_p_before": result.whiteness_before.p_value,
+        "whiteness_p_after": result.whiteness_after.p_value,
+        "indistinguishable_from": {e["name"]: e["evidence"].get("indistinguishable_from") for e in result.effects},
+        "runtime_s": round(result.runtime_s, 2),
+        "evaluations": result.selection.n_evaluations,
+    }
+
+
+def suite_imu(seeds: int) -> dict:
+    out: dict = {"single": {}, "two_effects": {}, "out_of_library": {}}
+    for label, (hidden, truth) in IMU_CASES.items():
+        out["single"][label] = s = score_imu(analyze_imu(make_imu_log(hidden)), truth)
+        print(f"[imu] {label}: {s['verdict']} {s['named']} err {s['worst_parameter_error_pct']} "
+              f"ratio {s['gap_ratio_all_channels']}", file=sys.stderr)  # fmt: skip
+    for label, (hidden, truth) in IMU_TWO_EFFECT_CASES.items():
+        out["two_effects"][label] = s = score_imu(analyze_imu(make_imu_log(hidden)), truth)
+        print(f"[imu] {label}: {s['verdict']} {s['named']} err {s['worst_parameter_error_pct']}", file=sys.stderr)
+    for label, hidden in IMU_OUT_OF_LIBRARY.items():
+        out["out_of_library"][label] = s = score_imu(analyze_imu(make_imu_log(hidden)), {}, expected="unexplained")
+        print(f"[imu] {label}: {s['verdict']} partial {s['partial']}", file=sys.stderr)
+    clean = []
+    for seed in range(seeds):
+        res = analyze_imu(make_imu_log({}, seed=100 + seed))
+        clean.append({"seed": 100 + seed, "verdict": res.verdict, "whiteness_p": res.whiteness_before.p_value,
+                      "runtime_s": round(res.runtime_s, 2)})  # fmt: skip
+        print(f"[imu clean] seed {100 + seed}: {res.verdict}", file=sys.stderr)
+    out["clean"] = {"seeds": seeds, "none": sum(c["verdict"] == "none" for c in clean), "runs": clean}
+    return out
+
+
+REVS = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def summarize_real(result) -> dict:
+    """What the discrepancy report says about a real log, compactly."""
+    doc = result.to_json()
+    gb = doc["gap_before"]
+    gp = doc["gap_after_partial"] or doc["gap_after"]
+    rounds = []
+    for r in doc["selection"]["rounds"]:
+        fitted = {k: v for k, v in r["candidates"].items() if v.get("fitted")}
+        rounds.append({
+            "accepted": r["accepted"],
+            "top": [{"name": k, "lr": round(v["lr"], 1), "lr_raw": round(v.get("lr_raw", v["lr"]), 0),
+                     "inflation": round(v.get("inflation", 1.0), 0), "delta_bic": round(v["delta_bic"], 1),
+                     "parameters": v["parameters"]}
+                    for k, v in sorted(fitted.items(), key=lambda kv: -kv[1]["lr"])[:4]],
+        })  # fmt: skip
+    tb = doc["locate"].get("turn_and_braking_before", {})
+    return {
+        "verdict": doc["verdict"],
+        "effects": {e["name"]: e["parameters"] for e in doc["effects"]},
+        "partial_effects": {e["name"]: e["parameters"] for e in doc["partial_effects"]},
+        "partial_evidence": {e["name"]: {k: e["evidence"].get(k) for k in
+                                         ("likelihood_ratio", "likelihood_ratio_raw", "inflation", "p_value",
+                                          "delta_bic", "indistinguishable_from")}
+                             for e in doc["partial_effects"] + doc["effects"]},  # fmt: skip
+        "band_rms_before": gb["band_rms"],
+        "band_rms_with_partial": gp["band_rms"],
+        "raw_rms_before": gb["rms"],
+        "normalised_band_all_before": gb["normalised_band_rms"]["all"],
+        "normalised_band_all_with_partial": gp["normalised_band_rms"]["all"],
+        "ratio_with_partial": gb["normalised_band_rms"]["all"] / gp["normalised_band_rms"]["all"],
+        "noise_sigma": doc["comparison"]["noise_sigma"],
+        "whiteness_before": doc["whiteness"]["before"],
+        "rounds": rounds,
+        "turn_and_braking": {"odd": tb.get("odd"), "even": tb.get("even"), "cells": tb.get("cells")},
+        "runtime_s": round(result.runtime_s, 1),
+        "tire": doc["nominal_model"]["tire"],
+    }
+
+
+def suite_imu_real(tires=("learned", "linear")) -> dict:
+    from tire_learning_env.io import read_vehicle
+
+    log = read_log(REVS / "revs_250lm_part1.csv")
+    vehicle = read_vehicle(REVS / "revs_250lm_vehicle.json")
+    t = log.sensors["t"]
+    split = 0.5 * (float(t[0]) + float(t[-1]))
+    parts = {"whole": log, "first_half": log.slice(None, split), "second_half": log.slice(split, None)}
+    out: dict = {"split_time_s": split, "load_average_before": [round(x, 2) for x in os.getloadavg()]}
+    for tire in tires:
+        for name, part in parts.items():
+            cpu0 = time.process_time()
+            res = analyze(part, vehicle, tire, progress=False)
+            out[f"{tire}/{name}"] = s = summarize_real(res)
+            s["cpu_s"] = round(time.process_time() - cpu0, 1)
+            print(f"[real] {tire}/{name}: {s['verdict']} partial {s['partial_effects']} "
+                  f"ratio {s['ratio_with_partial']:.3f} runtime {s['runtime_s']} s", file=sys.stderr)  # fmt: skip
+    out["load_average_after"] = [round(x, 2) for x in os.getloadavg()]
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--suite", choices=["speed", "accuracy", "clean", "robustness", "all"], default="speed")
+    ap.add_argument("--suite", choices=["speed", "accuracy", "clean", "robustness", "all", "imu", "imu_real"],
+                    default="speed")
     ap.add_argument("--seeds", type=int, default=20, help="clean suite: number of noise seeds")
     ap.add_argument("--robustness-seeds", type=int, default=5, help="robustness suite: noise seeds per effect")
     ap.add_argument("--rates", type=float, nargs="+", default=[100.0, 20.0], help="accuracy suite: camera rates [Hz]")
@@ -286,6 +473,10 @@ def main() -> None:
         result["clean"] = {f"{r:g}_hz": suite_clean(args.seeds, r) for r in args.rates}
     if args.suite in ("robustness", "all"):
         result["robustness"] = {f"{r:g}_hz": suite_robustness(args.robustness_seeds, r) for r in args.rates}
+    if args.suite == "imu":
+        result["imu"] = suite_imu(args.seeds)
+    if args.suite == "imu_real":
+        result["imu_real"] = suite_imu_real()
     emit(result)
 
 

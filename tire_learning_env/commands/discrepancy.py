@@ -6,34 +6,38 @@ import argparse
 import json
 from pathlib import Path
 
-from ..params import ParameterError
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "discrepancy",
         help="find where a nominal model and a driving log disagree and name the missing effect",
-        description="Compare the nominal model (bicycle + tire) with a camera driving log (LOG_FORMAT.md) "
-        "by multiple-shooting output error, locate the disagreement, fit every candidate effect of the "
-        "library (tire_relaxation, camera_latency, road_bank, steering_offset, camera_heading_bias, "
-        "cornering_stiffness_scale, load_transfer, crosswind, speed_dependent_stiffness), select by "
-        "likelihood ratio + BIC, and write DIR/report.json, DIR/report.md and PNG figures. Verdict: "
-        "found, none or unexplained. DIR is replaced atomically (never left half-written).",
+        description="Compare the nominal model (bicycle + tire) with a driving log (LOG_FORMAT.md) by "
+        "multiple-shooting output error, locate the disagreement, fit every candidate effect of the library, "
+        "select by likelihood ratio + BIC, and write DIR/report.json, DIR/report.md and PNG figures. Camera logs "
+        "(e1, e2, kappa): error-coordinate model, library tire_relaxation, camera_latency, road_bank, "
+        "steering_offset, camera_heading_bias, cornering_stiffness_scale, load_transfer, crosswind, "
+        "speed_dependent_stiffness. IMU-only logs (yaw_rate, ay, optional ax): body-frame model compared on "
+        "yaw_rate and ay, library tire_relaxation, cornering_stiffness_scale, longitudinal_load_transfer, "
+        "lateral_load_transfer, steering_offset, steering_compliance, steering_ratio_nonlinearity, steering_delay, "
+        "yaw_rate_bias, ay_bias, road_bank, accelerometer_offset, yaw_inertia_scale, speed_dependent_stiffness. "
+        "Verdict: found, none or unexplained. DIR is replaced atomically (never left half-written).",
     )
-    p.add_argument("log", type=Path, help="driving log CSV (camera columns e1, e2, kappa required)")
+    p.add_argument("log", type=Path, help="driving log CSV: a camera log (e1, e2, kappa) or an IMU-only log "
+                   "(yaw_rate, ay)")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--vehicle", type=Path, default=None,
                    help="nominal vehicle JSON (m, Iz, lf, lr, Cf, Cr, ...); default: the paper's D-class sedan")
     p.add_argument("--tire", choices=["pacejka", "linear", "learned"], default="pacejka",
-                   help="nominal tire: Pacejka (default), linear, or the curve the observer learns from this log")
+                   help="nominal tire: Pacejka (default), linear (the vehicle file's stiffness), or the curve the "
+                   "observer learns from this log (the IMU observer for an IMU-only log)")
     p.add_argument("--mu", type=float, default=None,
                    help="friction coefficient of the nominal Pacejka tire (default 1.0)")
     p.add_argument("--window", type=float, default=None, help="multiple-shooting window [s] (default 3)")
     p.add_argument("--no-imu", action="store_true", help="ignore yaw_rate / ay even if the log has them")
     p.add_argument("--steering", choices=["curvature", "linear", "hold"], default="curvature",
                    help="steering between logged rows: curvature (default; a sampled controller with a "
-                   "curvature feed-forward, like the simulator's driver), linear (a continuous signal, e.g. a "
-                   "human driver), hold")
+                   "curvature feed-forward, like the simulator's driver; IMU-only logs have no curvature and use "
+                   "linear), linear (a continuous signal, e.g. a human driver), hold")
     p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo null distributions")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -46,10 +50,6 @@ def run(args: argparse.Namespace) -> int:
 
     log = read_log(args.log)  # LogFormatError names what is wrong
     vehicle = read_vehicle(args.vehicle)  # ParameterError for an unreadable / invalid file
-    if log.kind != "camera":
-        raise ParameterError(
-            f"{args.log}: the discrepancy workflow needs a camera log (e1, e2, kappa); this is an IMU-only log"
-        )
     overrides = {"use_imu": not args.no_imu, "seed": args.seed, "steering": args.steering}
     if args.window is not None:
         overrides["window"] = args.window

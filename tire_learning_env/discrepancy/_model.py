@@ -39,9 +39,23 @@ from .._kernels import V_HCG, V_IZ, V_LF, V_LR, V_M, V_TRACK, tire_force
     TH_LOAD_TRANSFER,  # lateral load-transfer strength [-]
     TH_WIND,  # constant lateral force at the CG [N]
     TH_SPEED_COEF,  # speed-dependent stiffness coefficient [s^2/m^2]
-) = range(10)
-N_THETA = 10
-THETA_NOMINAL = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    # entries used by the body-frame model of IMU-only logs only (:mod:`._body_model`)
+    TH_LONG_LT,  # longitudinal load transfer: effective CG height [m]
+    TH_LAT_LT_F,  # lateral load transfer: front axle force loss at |a_y| = 1 g [-]
+    TH_LAT_LT_R,  # lateral load transfer: rear axle force loss at |a_y| = 1 g [-]
+    TH_STEER_QUICK,  # steering-ratio nonlinearity: relative extra road-wheel angle at 0.1 rad [-]
+    TH_STEER_COMP,  # steering compliance: road-wheel angle lost per newton of front axle force [rad/N]
+    TH_YAW_BIAS,  # yaw-rate sensor bias [rad/s]
+    TH_AY_BIAS,  # lateral accelerometer bias [m/s^2]
+    TH_IZ_SCALE,  # yaw inertia scale [-]
+    TH_ACC_OFFSET,  # accelerometer position ahead of the CG [m]
+    TH_STEER_DELAY,  # steering signal delay relative to the IMU [s]
+    TH_AY_SCALE,  # lateral accelerometer scale error (roll-induced gravity component) [-]
+) = range(21)
+N_THETA = 21
+THETA_NOMINAL = np.array(
+    [0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+)
 
 # measurement channels
 CH_E1, CH_E2, CH_YAW, CH_AY = range(4)

@@ -51,9 +51,14 @@ class DiscrepancyConfig(_Params):
     use_imu : bool
         Use ``yaw_rate`` / ``ay`` when the log has them.
     steering : {"curvature", "linear", "hold"}
-        How the steering evolves between logged rows (:func:`.data.steering_slope`).
+        How the steering evolves between logged rows (:func:`.data.steering_slope`);
+        IMU-only logs have no curvature and use ``linear`` instead of ``curvature``.
     seed : int
         Seed of the Monte Carlo null distributions.
+    correlation_correction : {"auto", "on", "off"}
+        Divide every likelihood-ratio statistic by the residual's variance inflation from
+        its correlation in time (:func:`.selection.long_run_variance`). ``auto``: on for
+        IMU-only logs (a real car's residual is never white at 100 Hz), off for camera logs.
     """
 
     window: float = 3.0  # [s]
@@ -74,6 +79,7 @@ class DiscrepancyConfig(_Params):
     use_imu: bool = True
     steering: str = "curvature"
     seed: int = 0
+    correlation_correction: str = "auto"
 
     _positive: ClassVar[tuple[str, ...]] = (
         "window", "step", "alpha", "whiteness_alpha", "whiteness_lags", "mc_draws", "min_speed",
@@ -92,6 +98,11 @@ class DiscrepancyConfig(_Params):
         if self.steering not in ("curvature", "linear", "hold"):
             raise ParameterError(
                 f"DiscrepancyConfig.steering must be 'curvature', 'linear' or 'hold', got {self.steering!r}"
+            )
+        if self.correlation_correction not in ("auto", "on", "off"):
+            raise ParameterError(
+                "DiscrepancyConfig.correlation_correction must be 'auto', 'on' or 'off', "
+                f"got {self.correlation_correction!r}"
             )
         if self.window < 4 * self.step or not math.isfinite(self.window):
             raise ParameterError(f"DiscrepancyConfig.window must be at least 4 steps, got {self.window!r}")

@@ -12,6 +12,10 @@
 
 The noise standard deviation of each channel is estimated from the data (third
 differences, which cancel any smooth signal) and floored (:class:`.config.DiscrepancyConfig`).
+
+An IMU-only log (no ``e1``, ``e2``, ``kappa``) goes to :func:`prepare_imu`: inputs
+``delta``, ``vx`` and a smoothed ``ax``, measurements ``yaw_rate`` and ``ay``, windows as
+above, initial state ``[vy, r]`` of the body-frame model (:mod:`._body_model`).
 """
 
 from __future__ import annotations
@@ -61,6 +65,16 @@ class ModelData:
         ``(vx_p95 - vx_p5) / median(vx)`` over the fitted rows [-].
     notes : list of str
         What was cleaned or skipped.
+    kind : {"camera", "imu"}
+        Which model compares: the error-coordinate model (camera log) or the body-frame
+        model (IMU-only log, :mod:`._body_model`).
+    ax : ndarray, shape (N,), optional
+        Longitudinal acceleration input of the body-frame model [m/s^2] (IMU logs).
+    primary : tuple of int
+        Channels that carry real measurement noise and enter the whiteness test and the
+        per-window limits: ``e1, e2`` for a camera log, ``yaw_rate, ay`` for an IMU log.
+    ay_guess : ndarray, shape (W,), optional
+        IMU logs: locally fitted ``a_y`` at each window's first row (for the ``vy`` guess).
     """
 
     t: NDArray
@@ -83,6 +97,10 @@ class ModelData:
     x0_guess: NDArray
     speed_variation: float
     notes: list[str] = field(default_factory=list)
+    kind: str = "camera"
+    ax: NDArray | None = None
+    primary: tuple[int, ...] = (CH_E1, CH_E2)
+    ay_guess: NDArray | None = None
 
     @property
     def n_windows(self) -> int:
@@ -164,41 +182,10 @@ def _local_state(t: NDArray, y: NDArray, t0: float, half: float) -> tuple[float,
     return float(c[-1]), float(c[-2])
 
 
-def prepare(log: DrivingLog, config: DiscrepancyConfig | None = None) -> ModelData:
-    """Arrays of the residual from a camera log (see module docstring).
 
-    Raises
-    ------
-    LogFormatError
-        Not a camera log, too short, too few frames, or no stretch fast enough to use.
-    """
-    config = config or DiscrepancyConfig()
-    src = log.source or "log"
-    if log.kind != "camera":
-        raise LogFormatError(
-            f"{src}: the discrepancy workflow needs a camera log (columns e1, e2, kappa); this is an IMU-only log"
-        )
-    s = log.sensors
-    notes: list[str] = []
-    t = np.asarray(s["t"], dtype=float)
-    delta = np.asarray(s["delta"], dtype=float)
-    vx = np.asarray(s["vx"], dtype=float)
-    kappa = np.asarray(s["kappa"], dtype=float).copy()
-    bad_k = ~np.isfinite(kappa)
-    if bad_k.any():
-        kappa[bad_k] = np.interp(t[bad_k], t[~bad_k], kappa[~bad_k]) if (~bad_k).any() else 0.0
-        notes.append(f"kappa missing on {int(bad_k.sum())} rows: interpolated")
-    pdd = vx * kappa
-    dslope = steering_slope(t, delta, kappa, vx, config.steering)
-    e1 = np.asarray(s["e1"], dtype=float)
-    e2 = np.asarray(s["e2"], dtype=float)
-    frames = np.isfinite(e1) & np.isfinite(e2)
-    min_frames = 50
-    if frames.sum() < min_frames:
-        raise LogFormatError(
-            f"{src}: only {int(frames.sum())} camera frames; at least {min_frames} are needed to fit anything"
-        )
-
+def _windows(t: NDArray, vx: NDArray, config: DiscrepancyConfig, src: str, notes: list[str]):
+    """Windows over contiguous usable stretches (fast enough, no long gaps): first simulated,
+    first measured and last row of each. Raises :class:`LogFormatError` when nothing is usable."""
     # usable rows: fast enough, no long gaps
     dt = np.diff(t)
     med_dt = float(np.median(dt))
@@ -255,15 +242,13 @@ def prepare(log: DrivingLog, config: DiscrepancyConfig | None = None) -> ModelDa
             f"{src}: too short to fit anything: {total:.3g} s of usable data, "
             f"at least {2 * config.window:.3g} s are needed"
         )
+    return win_sim, win_meas, win_end
 
-    # channels and their noise
-    values = {CH_E1: e1, CH_E2: e2}
-    present = {CH_E1: frames, CH_E2: frames}
-    if config.use_imu:
-        for ch, name in ((CH_YAW, "yaw_rate"), (CH_AY, "ay")):
-            if name in s and np.isfinite(s[name]).sum() >= min_frames:
-                values[ch] = np.asarray(s[name], dtype=float)
-                present[ch] = np.isfinite(values[ch])
+
+def _measurements(
+    values: dict, present: dict, win_meas: NDArray, win_end: NDArray, config: DiscrepancyConfig, n_rows: int
+):
+    """Noise levels per channel and the measurement arrays grouped by window."""
     sigma_est = np.full(4, math.nan)
     sigma = np.full(4, math.nan)
     floors = config.floors
@@ -272,12 +257,12 @@ def prepare(log: DrivingLog, config: DiscrepancyConfig | None = None) -> ModelDa
         est = sigma_est[ch] if math.isfinite(sigma_est[ch]) else 0.0
         sigma[ch] = max(est, floors[ch])
 
-    table = np.full((4, len(t)), np.nan)
+    table = np.full((4, n_rows), np.nan)
     for ch, y in values.items():
         table[ch] = y
     rows, chans, vals = [], [], []
     ptr = [0]
-    for w in range(len(win_sim)):
+    for w in range(len(win_meas)):
         r = np.arange(win_meas[w], win_end[w] + 1)
         per = []
         for ch in sorted(values):
@@ -294,6 +279,55 @@ def prepare(log: DrivingLog, config: DiscrepancyConfig | None = None) -> ModelDa
     meas_chan = np.concatenate(chans).astype(np.int64)
     meas_val = np.concatenate(vals)
     meas_w = 1.0 / sigma[meas_chan]
+    return sigma, sigma_est, meas_row, meas_chan, meas_val, meas_w, ptr
+
+
+def prepare(log: DrivingLog, config: DiscrepancyConfig | None = None) -> ModelData:
+    """Arrays of the residual from a camera log, or from an IMU-only log (:func:`prepare_imu`).
+
+    Raises
+    ------
+    LogFormatError
+        Too short, too few frames / IMU samples, or no stretch fast enough to use.
+    """
+    config = config or DiscrepancyConfig()
+    src = log.source or "log"
+    if log.kind != "camera":
+        return prepare_imu(log, config)
+    s = log.sensors
+    notes: list[str] = []
+    t = np.asarray(s["t"], dtype=float)
+    delta = np.asarray(s["delta"], dtype=float)
+    vx = np.asarray(s["vx"], dtype=float)
+    kappa = np.asarray(s["kappa"], dtype=float).copy()
+    bad_k = ~np.isfinite(kappa)
+    if bad_k.any():
+        kappa[bad_k] = np.interp(t[bad_k], t[~bad_k], kappa[~bad_k]) if (~bad_k).any() else 0.0
+        notes.append(f"kappa missing on {int(bad_k.sum())} rows: interpolated")
+    pdd = vx * kappa
+    dslope = steering_slope(t, delta, kappa, vx, config.steering)
+    e1 = np.asarray(s["e1"], dtype=float)
+    e2 = np.asarray(s["e2"], dtype=float)
+    frames = np.isfinite(e1) & np.isfinite(e2)
+    min_frames = 50
+    if frames.sum() < min_frames:
+        raise LogFormatError(
+            f"{src}: only {int(frames.sum())} camera frames; at least {min_frames} are needed to fit anything"
+        )
+
+    win_sim, win_meas, win_end = _windows(t, vx, config, src, notes)
+
+    # channels and their noise
+    values = {CH_E1: e1, CH_E2: e2}
+    present = {CH_E1: frames, CH_E2: frames}
+    if config.use_imu:
+        for ch, name in ((CH_YAW, "yaw_rate"), (CH_AY, "ay")):
+            if name in s and np.isfinite(s[name]).sum() >= min_frames:
+                values[ch] = np.asarray(s[name], dtype=float)
+                present[ch] = np.isfinite(values[ch])
+    sigma, sigma_est, meas_row, meas_chan, meas_val, meas_w, ptr = _measurements(
+        values, present, win_meas, win_end, config, len(t)
+    )
 
     # initial-state guesses at each window's first simulated row
     tf, y1, y2 = t[frames], e1[frames], e2[frames]
@@ -316,3 +350,111 @@ def prepare(log: DrivingLog, config: DiscrepancyConfig | None = None) -> ModelDa
         win_sim=win_sim, win_meas=win_meas, win_end=win_end, meas_ptr=np.array(ptr, dtype=np.int64),
         x0_guess=x0, speed_variation=variation, notes=notes,
     )  # fmt: skip
+
+
+#: how an IMU-only log is named in error messages (the reader says which kind of log it found)
+IMU_LOG = "IMU-only log, not a camera log: compared on yaw_rate and ay"
+#: centred moving-average widths of the longitudinal acceleration input [s]: the slope of vx, and
+#: the slow part of the logged ax (:func:`prepare_imu`)
+AX_SMOOTHING = 0.1
+AX_SLOW = 1.0
+
+
+def prepare_imu(log: DrivingLog, config: DiscrepancyConfig | None = None) -> ModelData:
+    """Arrays of the residual from an IMU-only log (``t, vx, delta, yaw_rate, ay`` [, ``ax``]).
+
+    The body-frame model (:mod:`._body_model`) is compared with the IMU channels
+    ``yaw_rate`` and ``ay``; the longitudinal acceleration input (it enters the longitudinal
+    load transfer only) is the slope of ``vx`` averaged over :data:`AX_SMOOTHING` s plus
+    the slow part (:data:`AX_SLOW` s) of the logged ``ax`` minus that slope. Steering
+    between rows is ``linear`` (a continuous signal) unless ``config.steering`` is ``hold``
+    (``curvature`` needs a path curvature and falls back to ``linear``, noted). Windows have
+    no pre-roll: the state is fitted at each window's first measured row. Only sensors are
+    read (never ``true_*``).
+    """
+    config = config or DiscrepancyConfig()
+    src = f"{log.source or 'log'} ({IMU_LOG})"
+    s = log.sensors
+    notes: list[str] = []
+    if not config.use_imu:
+        raise LogFormatError(f"{src}: use_imu is off, but an IMU-only log has no other channel to compare")
+    missing = [c for c in ("yaw_rate", "ay") if c not in s]
+    if missing:
+        raise LogFormatError(f"{src}: needs columns yaw_rate [rad/s] and ay [m/s^2]; missing {missing}")
+    t = np.asarray(s["t"], dtype=float)
+    delta = np.asarray(s["delta"], dtype=float)
+    vx = np.asarray(s["vx"], dtype=float)
+    mode = config.steering
+    if mode == "curvature":
+        mode = "linear"
+        notes.append("steering between rows: linear (an IMU-only log has no path curvature)")
+    dslope = steering_slope(t, delta, np.zeros_like(t), vx, mode)
+    # longitudinal acceleration: the slope of vx (clean: vx comes from GNSS/INS or wheel speeds) over
+    # AX_SMOOTHING, plus the slow part of (logged ax - slope) over AX_SLOW (grade, -r vy, sensor offset:
+    # the specific force is what transfers load), a complementary filter of the two
+    slope = np.gradient(vx, t) if len(t) > 1 else np.zeros_like(t)
+    ax = _moving_average_t(t, slope, AX_SMOOTHING)
+    if "ax" in s and np.isfinite(s["ax"]).sum() >= 0.5 * len(t):
+        ax_log = np.asarray(s["ax"], dtype=float).copy()
+        bad = ~np.isfinite(ax_log)
+        if bad.any():
+            ax_log[bad] = np.interp(t[bad], t[~bad], ax_log[~bad])
+            notes.append(f"ax missing on {int(bad.sum())} rows: interpolated")
+        ax = ax + _moving_average_t(t, ax_log - slope, AX_SLOW)
+        what = (f"slope of vx ({AX_SMOOTHING:g} s centred moving average) + slow part of logged ax - slope "
+                f"({AX_SLOW:g} s)")  # fmt: skip
+    else:
+        what = f"slope of vx ({AX_SMOOTHING:g} s centred moving average; no ax column)"
+    notes.append(f"longitudinal acceleration input (load transfer only): {what}")
+    min_samples = 50
+    values, present = {}, {}
+    for ch, name in ((CH_YAW, "yaw_rate"), (CH_AY, "ay")):
+        y = np.asarray(s[name], dtype=float)
+        ok = np.isfinite(y)
+        if ok.sum() < min_samples:
+            raise LogFormatError(f"{src}: only {int(ok.sum())} valid {name} samples; at least {min_samples} are needed")
+        values[ch], present[ch] = y, ok
+
+    # no pre-roll: the body-frame state is fitted at the window's first measured row, where the
+    # gyro pins r (the fast lateral modes could otherwise turn any initial state into a fit);
+    # a steering delay reads the logged steering before the window directly
+    win_sim, win_meas, win_end = _windows(t, vx, config.replace(preroll=0.0), src, notes)
+    sigma, sigma_est, meas_row, meas_chan, meas_val, meas_w, ptr = _measurements(
+        values, present, win_meas, win_end, config, len(t)
+    )
+    # initial-state guesses: yaw rate and lateral acceleration from local fits (the residual
+    # model turns a_y into a lateral velocity with the nominal vehicle, :class:`.ResidualModel`)
+    x0 = np.zeros((len(win_sim), 2))
+    ay0 = np.zeros(len(win_sim))
+    for w, js in enumerate(win_sim):
+        for ch, out in ((CH_YAW, None), (CH_AY, ay0)):
+            fin = present[ch]
+            value, _ = _local_state(t[fin], values[ch][fin], t[js], 0.1)
+            if out is None:
+                x0[w, 1] = value
+            else:
+                out[w] = value
+    used = np.concatenate([np.arange(win_sim[w], win_end[w] + 1) for w in range(len(win_sim))])
+    v_used = vx[used]
+    variation = float((np.percentile(v_used, 95) - np.percentile(v_used, 5)) / np.median(v_used))
+    chan_names = ("yaw_rate", "ay")
+    notes.append(
+        f"IMU-only log: body-frame model; {len(win_sim)} windows of ~{config.window:g} s, {len(meas_row)} "
+        f"measurements on channels {list(chan_names)}"
+    )
+    zeros = np.zeros_like(t)
+    return ModelData(
+        t=t, delta=delta, dslope=dslope, vx=vx, pdd=zeros, kappa=zeros, meas_row=meas_row, meas_chan=meas_chan,
+        meas_val=meas_val, meas_w=meas_w, sigma=sigma, sigma_estimated=sigma_est, channels=chan_names,
+        win_sim=win_sim, win_meas=win_meas, win_end=win_end, meas_ptr=np.array(ptr, dtype=np.int64),
+        x0_guess=x0, speed_variation=variation, notes=notes, kind="imu", ax=ax, primary=(CH_YAW, CH_AY),
+        ay_guess=ay0,
+    )  # fmt: skip
+
+
+def _moving_average_t(t: NDArray, y: NDArray, width: float) -> NDArray:
+    """Centred moving average of ``y`` over ``t +/- width / 2`` (``t`` sorted)."""
+    cs = np.concatenate([[0.0], np.cumsum(y)])
+    lo = np.searchsorted(t, t - 0.5 * width, side="left")
+    hi = np.searchsorted(t, t + 0.5 * width, side="right")
+    return (cs[hi] - cs[lo]) / (hi - lo)

@@ -37,6 +37,7 @@ __all__ = [
     "locate_windows",
     "regimes",
     "cross_correlation",
+    "turn_and_braking",
     "UNITS",
 ]
 
@@ -126,7 +127,10 @@ def gap(data: ModelData, evaluation: Evaluation, width: float = BAND_WIDTH) -> G
         sq_all.append(sq)
         if ch in (CH_E1, CH_E2):
             sq_cam.append(sq)
-    norm["camera"] = float(np.sqrt(np.mean(np.concatenate(sq_cam))))
+    if sq_cam:
+        norm["camera"] = float(np.sqrt(np.mean(np.concatenate(sq_cam))))
+    if data.kind == "imu":
+        norm["imu"] = float(np.sqrt(np.mean(np.concatenate(sq_all))))
     norm["all"] = float(np.sqrt(np.mean(np.concatenate(sq_all))))
     return GapSummary(rms, band, norm)
 
@@ -202,9 +206,13 @@ class WhitenessTest:
 def whiteness(
     data: ModelData, evaluation: Evaluation, lag_span: float, draws: int, rng: np.random.Generator
 ) -> WhitenessTest:
-    """Portmanteau test of the camera residuals (see module docstring)."""
+    """Portmanteau test of the residuals of the primary channels (see module docstring).
+
+    Primary channels (``data.primary``): camera ``e1, e2`` for a camera log, ``yaw_rate,
+    ay`` for an IMU-only log (there they carry the real measurement noise).
+    """
     lags = {}
-    for ch in (CH_E1, CH_E2):
+    for ch in data.primary:
         rows = data.meas_row[data.meas_chan == ch]
         if len(rows) < 20:
             continue
@@ -250,25 +258,27 @@ def whiteness(
 def locate_windows(data: ModelData, evaluation: Evaluation, level: float = 0.01) -> list[dict]:
     """Per window: time span, normalised residual mean square per channel, and whether it is excessive.
 
-    A window is flagged when the mean square of its camera residuals (the channels with
-    real measurement noise) exceeds the chi-square ``1 - level`` quantile of pure noise
-    for its number of camera samples, or when an IMU channel's mean square exceeds the
-    same limit for that channel (its noise level being the floor when it is quieter).
+    A window is flagged when the mean square of its primary residuals (camera ``e1, e2``;
+    ``yaw_rate, ay`` for an IMU-only log: the channels with real measurement noise) exceeds
+    the chi-square ``1 - level`` quantile of pure noise for its number of samples, or when
+    another (IMU) channel's mean square exceeds the same limit for that channel (its noise
+    level being the floor when it is quieter).
     """
     out = []
     r = evaluation.resid
+    n_state = evaluation.x0.shape[1] if evaluation.x0.ndim == 2 else 4
     for w in range(data.n_windows):
         a, b = data.meas_ptr[w], data.meas_ptr[w + 1]
         rr = r[a:b]
         chan = data.meas_chan[a:b]
         per = {CHANNELS[c]: float(np.mean(rr[chan == c] ** 2)) for c in np.unique(chan)}
-        cam = chan <= CH_E2
-        dof = max(int(cam.sum()) - 4, 1)
+        cam = np.isin(chan, data.primary)
+        dof = max(int(cam.sum()) - n_state, 1)
         ms = float(np.sum(rr[cam] ** 2)) / dof
         limit = float(stats.chi2.isf(level, dof)) / dof
         flagged = ms > limit
         for c in np.unique(chan):
-            if c > CH_E2:
+            if c not in data.primary:
                 k = int(np.sum(chan == c))
                 flagged |= per[CHANNELS[c]] > float(stats.chi2.isf(level, k)) / k
         out.append(
@@ -287,22 +297,36 @@ def locate_windows(data: ModelData, evaluation: Evaluation, level: float = 0.01)
 def regimes(data: ModelData, evaluation: Evaluation, trajectories: NDArray, n_bins: int = 4) -> dict:
     """Normalised residual mean square binned by regime: |slip|, |steering rate|, |curvature|, speed.
 
+    For an IMU-only log: |slip|, |steering rate|, |a_y|, speed, a_x and signed a_y
+    (measured), with the signed mean residual per channel in each bin as well.
+
     ``trajectories`` are the model's per-row outputs (:meth:`.ResidualModel.trajectories`),
     from which the slip level is taken. Each regime has quantile bins with their edges,
     counts and mean squares (1 = noise level).
     """
     r2 = evaluation.resid**2
     rows = data.meas_row
-    cam = data.meas_chan <= CH_E2
+    cam = np.isin(data.meas_chan, data.primary)
     dt = np.gradient(data.t)
     steer_rate = np.abs(np.gradient(data.delta) / dt)
     slip = np.maximum(np.abs(trajectories[:, OUT_ALPHA_F]), np.abs(trajectories[:, OUT_ALPHA_R]))
-    variables = {
-        "slip_angle_abs": (slip, "rad"),
-        "steering_rate_abs": (steer_rate, "rad/s"),
-        "curvature_abs": (np.abs(data.kappa), "1/m"),
-        "speed": (data.vx, "m/s"),
-    }
+    if data.kind == "imu":
+        ay = _measured(data, CH_AY)
+        variables = {
+            "slip_angle_abs": (slip, "rad"),
+            "steering_rate_abs": (steer_rate, "rad/s"),
+            "ay_abs": (np.abs(ay), "m/s^2"),
+            "speed": (data.vx, "m/s"),
+            "ax": (data.ax, "m/s^2"),
+            "ay": (ay, "m/s^2"),
+        }
+    else:
+        variables = {
+            "slip_angle_abs": (slip, "rad"),
+            "steering_rate_abs": (steer_rate, "rad/s"),
+            "curvature_abs": (np.abs(data.kappa), "1/m"),
+            "speed": (data.vx, "m/s"),
+        }
     out = {}
     for name, (values, unit) in variables.items():
         v = values[rows]
@@ -316,32 +340,107 @@ def regimes(data: ModelData, evaluation: Evaluation, trajectories: NDArray, n_bi
         bins = []
         for k in range(len(edges) - 1):
             sel = idx == k
-            bins.append(
-                {
-                    "low": float(edges[k]),
-                    "high": float(edges[k + 1]),
-                    "count": int(sel.sum()),
-                    "mean_square": float(np.mean(r2[ok][sel])) if sel.any() else math.nan,
+            entry = {
+                "low": float(edges[k]),
+                "high": float(edges[k + 1]),
+                "count": int(sel.sum()),
+                "mean_square": float(np.mean(r2[ok][sel])) if sel.any() else math.nan,
+            }
+            if data.kind == "imu":
+                # signed mean residual per channel [channel units]: a bias-like structure shows here
+                # (e.g. the same sign in left and right turns)
+                bin_rows = rows[ok][sel]
+                chans = data.meas_chan[ok][sel]
+                res = evaluation.resid[ok][sel]
+                entry["mean_residual"] = {
+                    CHANNELS[c]: float(np.mean(res[chans == c]) * data.sigma[c]) for c in data.primary
+                    if np.any(chans == c)
                 }
-            )
+                entry["row_count"] = int(len(np.unique(bin_rows)))
+            bins.append(entry)
         out[name] = {"unit": unit, "bins": bins}
     return out
 
 
-def cross_correlation(data: ModelData, evaluation: Evaluation, max_lag: float = 1.0) -> dict:
-    """Correlation of each camera residual with the inputs at lags ``-max_lag..max_lag``.
+#: thresholds of :func:`turn_and_braking` [m/s^2]
+TURN_AY = 2.0
+BRAKE_AX = 2.0
 
-    Inputs: steering, steering rate, curvature, speed (at the measurement rows). Returns
+
+def turn_and_braking(data: ModelData, evaluation: Evaluation) -> dict:
+    """IMU logs: mean band-limited residual per channel by turn direction and longitudinal phase.
+
+    Cells: turn (measured ``a_y`` averaged over 0.5 s: ``left`` > 2 m/s^2, ``straight``,
+    ``right`` < -2 m/s^2) times phase (``a_x`` input: ``braking`` < -2 m/s^2, ``neutral``,
+    ``traction`` > 2 m/s^2). Per phase also the parts of the turning residual that are
+    *odd* in the turn direction, ``(left - right) / 2`` (the car turns more or less than the
+    model: tire, load transfer, steering), and *even*, ``(left + right) / 2`` (the same sign
+    in left and right turns: a pull, a bias, a sensor or reference effect). Residual in
+    channel units [rad/s], [m/s^2]; ``n`` = samples.
+    """
+    smooth, _ = band_residual(data, evaluation.resid)
+    ay = _measured(data, CH_AY)
+    fin = np.isfinite(ay)
+    ay_s = np.full(len(data.t), np.nan)
+    if fin.any():
+        from .data import _moving_average_t
+
+        ay_s[fin] = _moving_average_t(data.t[fin], ay[fin], 0.5)
+    turns = {"left": lambda a: a > TURN_AY, "straight": lambda a: np.abs(a) <= TURN_AY, "right": lambda a: a < -TURN_AY}
+    phases = {"braking": lambda x: x < -BRAKE_AX, "neutral": lambda x: np.abs(x) <= BRAKE_AX,
+              "traction": lambda x: x > BRAKE_AX}  # fmt: skip
+    out: dict = {"thresholds_mps2": {"turn_ay": TURN_AY, "brake_ax": BRAKE_AX}, "cells": {}, "odd": {}, "even": {}}
+    for ch in data.primary:
+        name = CHANNELS[ch]
+        m = data.meas_chan == ch
+        rows = data.meas_row[m]
+        r = smooth[m] * data.sigma[ch]
+        a, x = ay_s[rows], data.ax[rows]
+        for ph, fp in phases.items():
+            means = {}
+            for tn, ft in turns.items():
+                sel = np.isfinite(a) & ft(a) & fp(x)
+                cell = out["cells"].setdefault(f"{ph}/{tn}", {})
+                cell["n"] = int(sel.sum())
+                cell[name] = float(np.mean(r[sel])) if sel.sum() >= 20 else math.nan
+                means[tn] = cell[name]
+            out["odd"].setdefault(ph, {})[name] = 0.5 * (means["left"] - means["right"])
+            out["even"].setdefault(ph, {})[name] = 0.5 * (means["left"] + means["right"])
+    return out
+
+
+def _measured(data: ModelData, channel: int) -> NDArray:
+    """Measured values of a channel per row (NaN where it has none), shape (N,)."""
+    out = np.full(len(data.t), np.nan)
+    m = data.meas_chan == channel
+    out[data.meas_row[m]] = data.meas_val[m]
+    return out
+
+
+def cross_correlation(data: ModelData, evaluation: Evaluation, max_lag: float = 1.0) -> dict:
+    """Correlation of each channel's residual with the inputs at lags ``-max_lag..max_lag``.
+
+    Inputs: steering, steering rate, curvature, speed (at the measurement rows); for an
+    IMU-only log steering, steering rate, speed, ``ax`` and the measured ``a_y``. Returns
     per (channel, input) the lag [s] and value of the largest correlation and the
     ``2 / sqrt(n)`` band of a white residual.
     """
     dt_row = np.gradient(data.t)
-    inputs = {
-        "delta": data.delta,
-        "steering_rate": np.gradient(data.delta) / dt_row,
-        "kappa": data.kappa,
-        "vx": data.vx,
-    }
+    if data.kind == "imu":
+        inputs = {
+            "delta": data.delta,
+            "steering_rate": np.gradient(data.delta) / dt_row,
+            "vx": data.vx,
+            "ax": data.ax,
+            "ay_measured": np.nan_to_num(_measured(data, CH_AY)),
+        }
+    else:
+        inputs = {
+            "delta": data.delta,
+            "steering_rate": np.gradient(data.delta) / dt_row,
+            "kappa": data.kappa,
+            "vx": data.vx,
+        }
     out = {}
     for ch in (CH_E1, CH_E2, CH_YAW, CH_AY):
         m = data.meas_chan == ch

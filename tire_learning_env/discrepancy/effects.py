@@ -31,6 +31,45 @@ name                           parameters [unit]          augmentation
 Not in the library, by necessity: a constant camera *offset* bias on ``e1`` cannot be
 told from an initial lateral offset (``e1`` does not enter the dynamics), so no
 dynamic-model comparison can see it.
+
+IMU-only logs (:data:`IMU_LIBRARY`, body-frame model :mod:`._body_model`, channels
+``yaw_rate`` and ``ay``) have their own list: the tire, steering and load-transfer effects
+a race car's IMU log can show, and the IMU's own errors. Entries whose physics is the same
+are the same objects (``tire_relaxation``, ``cornering_stiffness_scale``,
+``steering_offset``, ``road_bank``); ``speed_dependent_stiffness`` has the same form with
+bounds that keep ``1 - c vx^2`` positive up to 70 m/s. Camera effects have no meaning
+without a camera, and ``crosswind`` none on a closed track (the car's heading turns through
+the wind every lap).
+
+=================================  ===============================  =========================================
+name (IMU)                         parameters [unit]                augmentation of the body-frame model
+=================================  ===============================  =========================================
+``longitudinal_load_transfer``     ``effective_cg_height`` [m]      axle forces times ``F_z / F_z0``:
+                                                                    front ``1 - a_x h / (g lr)``, rear
+                                                                    ``1 + a_x h / (g lf)``
+``lateral_load_transfer``          ``front``, ``rear`` [-]          axle force times ``1 - k (a_y / g)^2``
+                                                                    (loss at 1 g per axle)
+``steering_compliance``            ``compliance`` [rad/N]           road-wheel angle ``delta - c F_yf``
+``steering_ratio_nonlinearity``    ``quickening`` [-]               road-wheel angle
+                                                                    ``delta (1 + q (delta / 0.1 rad)^2)``
+``steering_delay``                 ``delay`` [s]                    road wheels follow the logged steering
+                                                                    ``delay`` seconds later
+``yaw_rate_bias``                  ``bias`` [rad/s]                 measured yaw rate = ``r + bias``
+``ay_bias``                        ``bias`` [m/s^2]                 measured ``a_y`` = true + ``bias``
+``ay_scale``                       ``scale_error`` [-]              measured ``a_y`` = (1 + ``scale_error``) true
+                                                                    (body roll: ``g`` times the roll gradient)
+``accelerometer_offset``           ``distance`` [m]                 accelerometer ``distance`` ahead of the CG:
+                                                                    measured ``a_y`` + ``distance r_dot``
+``yaw_inertia_scale``              ``scale`` [-]                    yaw inertia ``Iz`` times ``scale``
+=================================  ===============================  =========================================
+
+What an IMU-only log cannot separate (:data:`IMU_CONFOUNDED`; the workflow also measures
+the correlation of every pair of candidate signatures on the log itself and reports the
+close ones as ``indistinguishable_from``): a bank angle equals an ``a_y`` bias plus a
+steering offset in steady state; steering compliance equals a front stiffness scale with
+a linear front tire; a yaw-rate bias ``b`` looks like a steering offset ``L b / vx``
+(separated only by the speed variation); lateral load transfer is a function of ``a_y``,
+which a tire curve learned as a function of slip largely absorbs.
 """
 
 from __future__ import annotations
@@ -41,6 +80,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._model import (
+    TH_ACC_OFFSET,
+    TH_AY_BIAS,
+    TH_AY_SCALE,
+    TH_IZ_SCALE,
+    TH_LAT_LT_F,
+    TH_LAT_LT_R,
+    TH_LONG_LT,
+    TH_STEER_COMP,
+    TH_STEER_DELAY,
+    TH_STEER_QUICK,
+    TH_YAW_BIAS,
     THETA_NOMINAL,
     TH_BANK,
     TH_E2_BIAS,
@@ -54,7 +104,17 @@ from ._model import (
     TH_WIND,
 )
 
-__all__ = ["CandidateEffect", "LIBRARY", "EFFECT_NAMES", "get_effect", "theta_of"]
+__all__ = [
+    "CandidateEffect",
+    "LIBRARY",
+    "EFFECT_NAMES",
+    "IMU_LIBRARY",
+    "IMU_EFFECT_NAMES",
+    "IMU_CONFOUNDED",
+    "library_for",
+    "get_effect",
+    "theta_of",
+]
 
 
 @dataclass(frozen=True)
@@ -165,17 +225,104 @@ LIBRARY: tuple[CandidateEffect, ...] = (
 EFFECT_NAMES: tuple[str, ...] = tuple(e.name for e in LIBRARY)
 
 
-def get_effect(name: str) -> CandidateEffect:
-    """The library entry called ``name`` (``KeyError`` naming the known ones otherwise)."""
-    for e in LIBRARY:
-        if e.name == name:
-            return e
-    raise KeyError(f"unknown effect {name!r}; the library has {list(EFFECT_NAMES)}")
+def _camera(name: str) -> CandidateEffect:
+    return next(e for e in LIBRARY if e.name == name)
 
 
-def theta_of(effects: dict[str, NDArray] | None = None) -> NDArray:
+#: The candidate library of IMU-only logs (body-frame model), in the order the report lists them.
+IMU_LIBRARY: tuple[CandidateEffect, ...] = (
+    _camera("tire_relaxation"),
+    _camera("cornering_stiffness_scale"),
+    _one("longitudinal_load_transfer", "longitudinal load transfer: the axle forces follow the axle loads, front "
+         "times 1 - a_x h / (g lr), rear times 1 + a_x h / (g lf) (braking loads the front); h is an effective CG "
+         "height: the CG height times the load sensitivity of the axle force (1 = proportional)",
+         "effective_cg_height", "m", TH_LONG_LT, (-1.0, 2.0), 0.1, (0.0, 0.3)),
+    CandidateEffect(
+        "lateral_load_transfer",
+        "lateral load transfer with load-sensitive tires: each axle force drops by k (a_y / g)^2 (front and rear k "
+        "differ with the roll-stiffness distribution; the loss at 1 g)",
+        ("front", "rear"), ("-", "-"), (TH_LAT_LT_F, TH_LAT_LT_R), ((-0.5, 0.9), (-0.5, 0.9)), (0.05, 0.05),
+        (0.0, 0.0), ((0.0, 0.0), (0.1, 0.1)),
+    ),
+    _camera("steering_offset"),
+    _one("steering_compliance", "steering compliance: the road wheels turn back by compliance times the front axle "
+         "force (aligning moment against a compliant steering column and mounts)", "compliance", "rad/N",
+         TH_STEER_COMP, (0.0, 1e-5), 5e-7, (1e-6,)),
+    _one("steering_ratio_nonlinearity", "steering-ratio nonlinearity: road-wheel angle delta (1 + quickening "
+         "(delta / 0.1 rad)^2), i.e. the ratio is 1 + quickening times quicker at 0.1 rad than on centre",
+         "quickening", "-", TH_STEER_QUICK, (-0.5, 1.0), 0.05, (0.0,)),
+    _one("steering_delay", "steering signal delay: the road wheels follow the logged steering delay seconds later "
+         "(sensor synchronisation; negative: the steering is logged late)", "delay", "s", TH_STEER_DELAY,
+         (-0.1, 0.25), 0.01, (0.02, 0.05, -0.02)),
+    _one("yaw_rate_bias", "yaw-rate sensor bias: the gyro reads the yaw rate plus bias", "bias", "rad/s",
+         TH_YAW_BIAS, (-0.05, 0.05), 0.001, (0.0,)),
+    _one("ay_bias", "lateral accelerometer bias (or a sensor roll misalignment on a level road): the accelerometer "
+         "reads the lateral specific force plus bias", "bias", "m/s^2", TH_AY_BIAS, (-2.0, 2.0), 0.05, (0.0,)),
+    _one("ay_scale", "lateral accelerometer scale error: the accelerometer reads (1 + scale_error) a_y; a body-fixed "
+         "accelerometer that rolls with the body by phi = k a_y reads a_y + g sin(phi), i.e. scale_error = g k "
+         "(0.03 = a roll gradient of 1.7 deg/g), or a calibration error", "scale_error", "-", TH_AY_SCALE,
+         (-0.3, 0.3), 0.01, (0.0,)),
+    _camera("road_bank"),
+    _one("accelerometer_offset", "accelerometer mounted distance ahead of the CG (or a CG position error): it reads "
+         "a_y + distance r_dot", "distance", "m", TH_ACC_OFFSET, (-3.0, 3.0), 0.1, (0.0,)),
+    _one("yaw_inertia_scale", "yaw moment of inertia error: Iz times scale", "scale", "-", TH_IZ_SCALE, (0.3, 3.0), 0.1,
+         (1.0, 1.5), absent=1.0),
+    _one("speed_dependent_stiffness", "tire forces that change with speed: both axle forces times "
+         "1 - coefficient vx^2 (aerodynamic lift unloads the tires, downforce (negative coefficient) loads them)",
+         "coefficient", "s^2/m^2", TH_SPEED_COEF, (-2e-4, 2e-4), 2e-5, (0.0,), speed=True),
+)
+
+IMU_EFFECT_NAMES: tuple[str, ...] = tuple(e.name for e in IMU_LIBRARY)
+
+#: effect pairs an IMU-only log cannot (or can hardly) tell apart, and why
+IMU_CONFOUNDED: dict[frozenset, str] = {
+    frozenset({"ay_bias", "road_bank"}): (
+        "in steady state a bank angle acts as an a_y bias of -g sin(bank) plus a steering offset of -K g sin(bank) "
+        "(K the understeer gradient); only transients at varying speed and the tire nonlinearity separate them"
+    ),
+    frozenset({"steering_offset", "road_bank"}): (
+        "a bank angle shifts the slip balance like a steering offset (and the a_y level like an a_y bias)"
+    ),
+    frozenset({"steering_compliance", "cornering_stiffness_scale"}): (
+        "with a linear front tire a steering compliance c is exactly a front stiffness scale 1 / (1 + 2 Cf c); "
+        "only the tire nonlinearity separates them"
+    ),
+    frozenset({"yaw_rate_bias", "steering_offset"}): (
+        "a yaw-rate bias b shifts the kinematic steering delta - L r / vx like a steering offset L b / vx; only the "
+        "speed variation separates them"
+    ),
+}
+
+
+def library_for(kind: str) -> tuple[CandidateEffect, ...]:
+    """The candidate library of a log kind: ``"camera"`` (:data:`LIBRARY`) or ``"imu"`` (:data:`IMU_LIBRARY`)."""
+    if kind == "camera":
+        return LIBRARY
+    if kind == "imu":
+        return IMU_LIBRARY
+    raise ValueError(f"log kind must be 'camera' or 'imu', got {kind!r}")
+
+
+def get_effect(name: str, kind: str | None = None) -> CandidateEffect:
+    """The library entry called ``name`` (``KeyError`` naming the known ones otherwise).
+
+    ``kind`` (``"camera"`` / ``"imu"``) picks the library; by default the camera library
+    is searched first, then the IMU library.
+    """
+    libraries = (LIBRARY, IMU_LIBRARY) if kind is None else (library_for(kind),)
+    for lib in libraries:
+        for e in lib:
+            if e.name == name:
+                return e
+    known = list(EFFECT_NAMES) if kind == "camera" else list(IMU_EFFECT_NAMES) if kind == "imu" else list(
+        dict.fromkeys(EFFECT_NAMES + IMU_EFFECT_NAMES)
+    )
+    raise KeyError(f"unknown effect {name!r}; the library has {known}")
+
+
+def theta_of(effects: dict[str, NDArray] | None = None, kind: str | None = None) -> NDArray:
     """``theta`` of the nominal model with the given ``{name: values}`` effects applied."""
     theta = THETA_NOMINAL.copy()
     for name, values in (effects or {}).items():
-        theta = get_effect(name).apply(theta, values)
+        theta = get_effect(name, kind).apply(theta, values)
     return theta

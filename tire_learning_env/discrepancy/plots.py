@@ -21,6 +21,8 @@ __all__ = [
     "plot_candidates",
     "plot_whiteness",
     "plot_force_slip_loop",
+    "plot_regime_residuals",
+    "plot_worst_window",
 ]
 
 _SCALE = {
@@ -80,9 +82,10 @@ def plot_disagreement(result, path=None):
     lim = [w["limit"] for w in result.windows_before]
     if lim:
         ax.axhline(float(np.median(lim)), color="k", ls="--", lw=1.0, label="noise limit (99 %)")
+    primary = "IMU" if result.data.kind == "imu" else "camera"
     ax.set_yscale("log")
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("camera normalised mean square per window")
+    ax.set_ylabel(f"{primary} normalised mean square per window")
     ax.set_title("when: disagreement per window")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, which="both")
@@ -105,7 +108,7 @@ def plot_disagreement(result, path=None):
     ax.set_yticklabels(labels, fontsize=7)
     ax.axvline(1.0, color="k", ls="--", lw=1.0)
     ax.set_xscale("log")
-    ax.set_xlabel("camera normalised mean square (1 = noise)")
+    ax.set_xlabel(f"{primary} normalised mean square (1 = noise)")
     ax.set_title("in which regime (red before, blue after)")
     ax.grid(alpha=0.3, which="both")
     return save_figure(fig, path)
@@ -147,13 +150,13 @@ def plot_whiteness(result, path=None):
             rate = 1.0 / float(np.median(np.diff(d.t[rows])))
             lags = np.arange(1, len(acf) + 1) / rate
             ax.plot(lags, acf, style, label=f"{name} {label} (p = {test.p_value:.2g})")
-    n = int((d.meas_chan == 0).sum())
+    n = int((d.meas_chan == d.primary[0]).sum())
     ax.axhspan(-2 / math.sqrt(n), 2 / math.sqrt(n), color="0.85", label="white +/- 2/sqrt(n)")
     ax.set_xlabel("lag [s]")
     ax.set_ylabel("autocorrelation")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    ax.set_title("residual whiteness (camera)")
+    ax.set_title("residual whiteness (" + ("IMU" if d.kind == "imu" else "camera") + ")")
     return save_figure(fig, path)
 
 
@@ -196,3 +199,131 @@ def plot_force_slip_loop(result, path=None):
 
 def channel_unit(name: str) -> str:
     return UNITS[name]
+
+
+def _with_effects(result):
+    """The evaluation with the accepted effects (found or partial) and its label, or None."""
+    sel = result.selection
+    if not sel.accepted:
+        return None, None
+    names = ", ".join(e.name for e, _, _ in sel.accepted)
+    label = f"with {names}" + ("" if result.verdict == "found" else " (partial)")
+    return sel.final, label
+
+
+def _binned_mean(x, y, edges):
+    idx = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+    mean = np.full(len(edges) - 1, np.nan)
+    err = np.full(len(edges) - 1, np.nan)
+    for k in range(len(edges) - 1):
+        sel = idx == k
+        if sel.sum() >= 20:
+            mean[k] = float(np.mean(y[sel]))
+            # standard error with ~0.5 s of correlated samples (band-limited residual)
+            err[k] = float(np.std(y[sel]) / math.sqrt(max(sel.sum() / 50.0, 1.0)))
+    return mean, err
+
+
+def plot_regime_residuals(result, path=None):
+    """IMU logs: mean band-limited residual (measured - model) of yaw rate and a_y.
+
+    Left column: against the measured a_y (left / right turns), nominal model and with the
+    accepted effects. Right column: against the a_x input (braking / traction), nominal
+    model, separately in left turns, right turns and on straights (the thresholds of
+    :func:`.diagnostics.turn_and_braking`): a residual of the same sign in left and right
+    turns is even in a_y.
+    """
+    from .data import _moving_average_t
+    from .diagnostics import TURN_AY
+
+    d = result.data
+    ay_meas = np.full(len(d.t), np.nan)
+    m_ay = d.meas_chan == CHANNELS.index("ay")
+    ay_meas[d.meas_row[m_ay]] = d.meas_val[m_ay]
+    fin = np.isfinite(ay_meas)
+    ay_s = np.full(len(d.t), np.nan)
+    ay_s[fin] = _moving_average_t(d.t[fin], ay_meas[fin], 0.5)
+    series = [("nominal", result.nominal, "tab:red")]
+    ev, label = _with_effects(result)
+    if ev is not None:
+        series.append((label, ev, "tab:blue"))
+    smooth_nominal, _ = band_residual(d, result.nominal.resid)
+    fig, axes = plt.subplots(2, 2, figsize=(12, 7.5), squeeze=False)
+    edges_ay = np.linspace(-16, 16, 33)
+    edges_ax = np.linspace(-10, 6, 17)
+    for row, name in enumerate(("yaw_rate", "ay")):
+        ch = CHANNELS.index(name)
+        m = d.meas_chan == ch
+        rows = d.meas_row[m]
+        scale, unit = _SCALE[name]
+        ax = axes[row, 0]
+        x = ay_meas[rows]
+        ok = np.isfinite(x)
+        mid = 0.5 * (edges_ay[1:] + edges_ay[:-1])
+        for lab, e, colour in series:
+            smooth, _ = band_residual(d, e.resid)
+            mean, err = _binned_mean(x[ok], (smooth[m] * d.sigma[ch] * scale)[ok], edges_ay)
+            ax.errorbar(mid, mean, yerr=err, fmt="o-", ms=3, lw=1.0, color=colour, label=lab, capsize=2)
+        ax.set_xlabel("measured a_y [m/s^2]")
+        ax = axes[row, 1]
+        y = smooth_nominal[m] * d.sigma[ch] * scale
+        a, xa = ay_s[rows], d.ax[rows]
+        mid = 0.5 * (edges_ax[1:] + edges_ax[:-1])
+        for lab, sel, colour in (
+            (f"left turns (a_y > {TURN_AY:g})", a > TURN_AY, "tab:green"),
+            ("straight", np.abs(a) <= TURN_AY, "0.4"),
+            (f"right turns (a_y < -{TURN_AY:g})", a < -TURN_AY, "tab:purple"),
+        ):
+            sel = sel & np.isfinite(a)
+            mean, err = _binned_mean(xa[sel], y[sel], edges_ax)
+            ax.errorbar(mid, mean, yerr=err, fmt="o-", ms=3, lw=1.0, color=colour, label=lab, capsize=2)
+        ax.set_xlabel("a_x input [m/s^2] (nominal model)")
+        for ax in axes[row]:
+            ax.axhline(0.0, color="k", lw=0.6)
+            ax.set_ylabel(f"{name} residual [{unit}]")
+            ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
+    axes[0, 1].legend(fontsize=8)
+    fig.suptitle("mean band-limited residual (measured - model) by regime; bars: standard error (0.5 s correlation)")
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def plot_worst_window(result, path=None):
+    """IMU logs: the window where the nominal model disagrees most: measured and model yaw
+    rate and a_y (nominal and with the accepted effects), speed, steering and a_x."""
+    d = result.data
+    wins = result.windows_before
+    w = int(np.argmax([x["mean_square"] for x in wins]))
+    j0, j1 = int(d.win_meas[w]), int(d.win_end[w])
+    rows = np.arange(j0, j1 + 1)
+    t = d.t[rows]
+    trajs = [("nominal", result.trajectories_before, "tab:red")]
+    ev, label = _with_effects(result)
+    if ev is not None:
+        trajs.append((label, result.model.trajectories(ev), "tab:blue"))
+    from ._model import OUT_AY, OUT_YAW
+
+    fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
+    for ax, name, col in ((axes[0], "yaw_rate", OUT_YAW), (axes[1], "ay", OUT_AY)):
+        ch = CHANNELS.index(name)
+        m = (d.meas_chan == ch) & (d.meas_row >= j0) & (d.meas_row <= j1)
+        scale, unit = _SCALE[name]
+        ax.plot(d.t[d.meas_row[m]], d.meas_val[m] * scale, ".", ms=2, color="0.4", label="measured")
+        for lab, tr, colour in trajs:
+            ax.plot(t, tr[rows, col] * scale, "-", lw=1.2, color=colour, label=lab)
+        ax.set_ylabel(f"{name} [{unit}]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    ax = axes[2]
+    ax.plot(t, d.vx[rows], color="k", label="vx [m/s]")
+    ax.set_ylabel("vx [m/s]")
+    ax2 = ax.twinx()
+    ax2.plot(t, np.degrees(d.delta[rows]) * 10, color="tab:green", label="delta x10 [deg]")
+    ax2.plot(t, d.ax[rows], color="tab:purple", label="ax [m/s^2]")
+    ax2.legend(fontsize=8, loc="lower right")
+    ax.set_xlabel("time [s]")
+    ax.grid(alpha=0.3)
+    fig.suptitle(f"worst window of the nominal model: {wins[w]['t_start']:.1f}-{wins[w]['t_end']:.1f} s "
+                 f"(normalised mean square {wins[w]['mean_square']:.3g})")  # fmt: skip
+    return save_figure(fig, path)

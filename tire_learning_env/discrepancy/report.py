@@ -44,6 +44,9 @@ def write_report(result: DiscrepancyResult, out: str | Path, overwrite: bool = T
         }
         if any(e["name"] == "tire_relaxation" for e in result.effects):
             figures["force_slip_loop.png"] = plots.plot_force_slip_loop
+        if result.data.kind == "imu":
+            figures["regime_residuals.png"] = plots.plot_regime_residuals
+            figures["worst_window.png"] = plots.plot_worst_window
         for name, fn in figures.items():
             fn(result, path=tmp / name)
         doc = result.to_json()
@@ -92,12 +95,16 @@ def render_markdown(result: DiscrepancyResult, doc: dict) -> str:
             if "note" in ev:
                 lines.append(f"  Note: {ev['note']}.")
         lines.append("")
+    imu = result.data.kind == "imu"
+    primary = "IMU (yaw_rate, ay)" if imu else "camera"
     if result.partial_effects:
         lines += ["## Partial explanations (not the answer)", ""]
         for e in result.partial_effects:
             params = ", ".join(f"{k} = {_fmt(v)} {e['units'][k]}" for k, v in e["parameters"].items())
             lines.append(f"- `{e['name']}` ({params}) was significant but leaves a structured residual.")
         lines.append("")
+        if imu:
+            lines += _partial_table(result)
     lines += ["## Gap before and after", ""]
     lines += ["| channel | RMS before | RMS after | band RMS before | band RMS after | band ratio |", "|---|---|---|---|---|---|"]
     gb, ga = result.gap_before, result.gap_after
@@ -108,10 +115,11 @@ def render_markdown(result: DiscrepancyResult, doc: dict) -> str:
             f"| {ch} [{unit}] | {_fmt(gb.rms[ch])} | {_fmt(ga.rms[ch])} | {_fmt(gb.band_rms[ch])} | "
             f"{_fmt(ga.band_rms[ch])} | {_fmt(ratios['band'][ch], 3)} |"
         )
+    other = "camera" if "camera" in ratios["normalised_band"] else None
     lines += [
         "",
-        f"Gap ratio (noise-normalised band RMS, all channels): **{_fmt(result.gap_ratio, 3)}**; camera channels only: "
-        f"{_fmt(ratios['normalised_band']['camera'], 3)}.",
+        f"Gap ratio (noise-normalised band RMS, all channels): **{_fmt(result.gap_ratio, 3)}**"
+        + (f"; camera channels only: {_fmt(ratios['normalised_band'][other], 3)}." if other else "."),
         "",
         "![residuals](residuals.png)",
         "",
@@ -126,7 +134,7 @@ def render_markdown(result: DiscrepancyResult, doc: dict) -> str:
     if flagged:
         worst = sorted(flagged, key=lambda w: -w["mean_square"])[:5]
         lines.append("Worst windows: " + ", ".join(f"{w['t_start']:.1f}-{w['t_end']:.1f} s ({w['mean_square']:.3g})" for w in worst) + ".")
-    lines += ["", "| regime | bin | camera mean square before | after |", "|---|---|---|---|"]
+    lines += ["", f"| regime | bin | {primary} mean square before | after |", "|---|---|---|---|"]
     for name, reg in result.regimes_before.items():
         after = result.regimes_after.get(name, {}).get("bins", [])
         for k, b in enumerate(reg["bins"]):
@@ -135,7 +143,7 @@ def render_markdown(result: DiscrepancyResult, doc: dict) -> str:
     wb, wa = result.whiteness_before, result.whiteness_after
     lines += [
         "",
-        f"Whiteness of the camera residual (portmanteau over {doc['config']['whiteness_lags']:g} s of lags, Monte Carlo null): "
+        f"Whiteness of the {primary} residual (portmanteau over {doc['config']['whiteness_lags']:g} s of lags, Monte Carlo null): "
         f"before p = {_fmt(wb.p_value, 2)} (statistic {_fmt(wb.statistic)}, null mean {_fmt(wb.null_mean)}); "
         f"after p = {_fmt(wa.p_value, 2)}.",
         "",
@@ -145,6 +153,8 @@ def render_markdown(result: DiscrepancyResult, doc: dict) -> str:
     cc = sorted(result.cross_correlation_before.items(), key=lambda kv: -abs(kv[1]["correlation"]))[:6]
     for key, v in cc:
         lines.append(f"- {key}: {v['correlation']:+.3f} at lag {v['lag_s']:+.2f} s (white band +/- {v['white_band']:.3f})")
+    if imu:
+        lines += _imu_regime_lines(result)
     lines += ["", "![disagreement](disagreement.png)", "", "![whiteness](whiteness.png)", "", "## Candidates", ""]
     lines += ["| round | candidate | score | fitted | chi2 reduction (LR) | p-value | dBIC | parameters |", "|---|---|---|---|---|---|---|---|"]
     for st in result.selection.steps:
@@ -168,6 +178,73 @@ def render_markdown(result: DiscrepancyResult, doc: dict) -> str:
         "Verdict rules: " + doc["verdict_rules"],
         "",
     ]
+    if imu:
+        lines += ["## What an IMU-only log cannot tell apart", ""]
+        for item in doc.get("identifiability", []):
+            lines.append(f"- {', '.join(f'`{n}`' for n in item['effects'])}: {item['why']}.")
+        lines.append("")
     if result.notes or doc["log"]["notes"]:
         lines += ["## Notes", ""] + [f"- {n}" for n in doc["log"]["notes"] + result.notes] + [""]
     return "\n".join(lines)
+
+
+def _partial_table(result: DiscrepancyResult) -> list[str]:
+    """Evidence of the partial effects and the gap they close (IMU logs)."""
+    lines = [
+        "| effect | LR (raw) | variance inflation | LR used | p-value | dBIC | closest other signature |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for e in result.partial_effects:
+        ev = e["evidence"]
+        corr = ev.get("signature_correlation", {})
+        close = max(corr, key=corr.get) if corr else None
+        lines.append(
+            f"| `{e['name']}` | {_fmt(ev.get('likelihood_ratio_raw'))} | {_fmt(ev.get('inflation'), 3)} | "
+            f"{_fmt(ev.get('likelihood_ratio'))} | {_fmt(ev.get('p_value'), 2)} | {_fmt(ev.get('delta_bic'))} | "
+            + (f"`{close}` ({corr[close]:.3f})" if close else "-")
+            + " |"
+        )
+    if result.gap_after_partial is not None:
+        gb, gp = result.gap_before, result.gap_after_partial
+        lines += ["", "Gap with the partial effects added:", "", "| channel | band RMS before | band RMS with partial effects | ratio |", "|---|---|---|---|"]
+        for ch in gb.band_rms:
+            ratio = gb.band_rms[ch] / gp.band_rms[ch] if gp.band_rms[ch] > 0 else math.inf
+            lines.append(f"| {ch} | {_fmt(gb.band_rms[ch])} | {_fmt(gp.band_rms[ch])} | {_fmt(ratio, 3)} |")
+        allr = gb.normalised_band_rms["all"] / gp.normalised_band_rms["all"]
+        lines += ["", f"Normalised band ratio, all channels: {_fmt(allr, 3)}."]
+    lines.append("")
+    return lines
+
+
+def _imu_regime_lines(result: DiscrepancyResult) -> list[str]:
+    """Signed mean residual by measured a_y (left / right turns) and a_x (braking / traction)."""
+    lines = ["", "Signed mean residual (measured - model) by regime, nominal model (and final model when an effect was found):", ""]
+    lines += ["| regime | bin | yaw_rate mean [rad/s] | ay mean [m/s^2] | after: yaw_rate | after: ay |", "|---|---|---|---|---|---|"]
+    for name in ("ay", "ax", "speed"):
+        reg = result.regimes_before.get(name)
+        if not reg:
+            continue
+        after = result.regimes_after.get(name, {}).get("bins", [])
+        for k, b in enumerate(reg["bins"]):
+            mb = b.get("mean_residual", {})
+            ma = after[k].get("mean_residual", {}) if k < len(after) and result.verdict == "found" else {}
+            lines.append(
+                f"| {name} [{reg['unit']}] | {_fmt(b['low'], 3)} - {_fmt(b['high'], 3)} | {_fmt(mb.get('yaw_rate'), 3)} | "
+                f"{_fmt(mb.get('ay'), 3)} | {_fmt(ma.get('yaw_rate'), 3)} | {_fmt(ma.get('ay'), 3)} |"
+            )
+    tb = result.turn_braking_before
+    if tb:
+        lines += ["", "Mean band-limited residual by turn direction and longitudinal phase (nominal model; "
+                  f"turns |a_y| > {tb['thresholds_mps2']['turn_ay']:g} m/s^2, braking / traction |a_x| > "
+                  f"{tb['thresholds_mps2']['brake_ax']:g} m/s^2):", ""]
+        lines += ["| phase / turn | samples | yaw_rate [rad/s] | ay [m/s^2] |", "|---|---|---|---|"]
+        for cell, v in tb["cells"].items():
+            lines.append(f"| {cell} | {v['n']} | {_fmt(v.get('yaw_rate'), 3)} | {_fmt(v.get('ay'), 3)} |")
+        lines += ["", "| phase | odd in turn direction (left - right)/2: yaw_rate, ay | even (left + right)/2: yaw_rate, ay |",
+                  "|---|---|---|"]
+        for ph in tb["odd"]:
+            o, e = tb["odd"][ph], tb["even"][ph]
+            lines.append(f"| {ph} | {_fmt(o.get('yaw_rate'), 3)}, {_fmt(o.get('ay'), 3)} | "
+                         f"{_fmt(e.get('yaw_rate'), 3)}, {_fmt(e.get('ay'), 3)} |")
+    lines += ["", "![residual by regime](regime_residuals.png)", "", "![worst window](worst_window.png)", ""]
+    return lines

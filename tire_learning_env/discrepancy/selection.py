@@ -73,15 +73,71 @@ class CandidateFit:
         return self.evaluation.theta
 
 
-def significance(chi2_before: float, chi2_after: float, k: int, n: int) -> dict[str, float]:
-    """Likelihood-ratio statistic, its chi-square p-value and the BIC change (negative = better)."""
+def significance(
+    chi2_before: float, chi2_after: float, k: int, n: int, inflation: float | None = None
+) -> dict[str, float]:
+    """Likelihood-ratio statistic, its chi-square p-value and the BIC change (negative = better).
+
+    ``inflation`` (>= 1, :func:`long_run_variance`): the statistic is divided by it before
+    the test and the BIC (a residual that is correlated in time carries fewer independent
+    samples than it has; the raw statistic is kept as ``lr_raw``). ``None``: no correction
+    (the keys are then exactly those of the uncorrected test).
+    """
     lr = max(chi2_before - chi2_after, 0.0)
+    out = {}
+    if inflation is not None:
+        out = {"lr_raw": float(lr), "inflation": float(inflation)}
+        lr = lr / inflation
     return {
         "lr": float(lr),
         "p_value": float(stats.chi2.sf(lr, k)),
         "delta_bic": float(-lr + k * math.log(n)),
         "k": int(k),
+        **out,
     }
+
+
+def long_run_variance(data, resid: NDArray, span: float = 1.0) -> float:
+    """Variance inflation of a weighted residual from its correlation in time, floored at 1.
+
+    Per channel, within windows: the Bartlett-weighted long-run variance
+    ``gamma_0 + 2 sum_{l=1}^{L} (1 - l / (L + 1)) gamma_l`` (``L`` = ``span`` seconds of
+    lags, no mean removed: a residual offset is misfit too) of ``resid`` (which is
+    ``(y - y_model) / sigma``); the channels' values averaged by their sample counts. For
+    white residual at the assumed noise level it is 1; a residual correlated over a
+    second, or noisier than assumed, makes it larger, and the likelihood-ratio statistic
+    of an effect whose signature is slow (all of them: they act through the dynamics) has
+    its variance inflated by about this factor (a Newey-West correction).
+    """
+    wid = data.window_of_measurement()
+    total, count = 0.0, 0
+    for ch in data.primary:
+        idx = np.flatnonzero(data.meas_chan == ch)
+        if len(idx) < 20:
+            continue
+        x = resid[idx]
+        w = wid[idx]
+        rate = 1.0 / float(np.median(np.diff(data.t[data.meas_row[idx]])))
+        n_lag = max(1, int(round(span * rate)))
+        lrv = float(x @ x) / len(x)
+        for lag in range(1, n_lag + 1):
+            same = w[lag:] == w[:-lag]
+            gamma = float(np.sum(x[lag:][same] * x[:-lag][same])) / len(x)
+            lrv += 2.0 * (1.0 - lag / (n_lag + 1.0)) * gamma
+        total += lrv * len(idx)
+        count += len(idx)
+    return max(1.0, total / count) if count else 1.0
+
+
+def signature_correlation(a: NDArray, b: NDArray) -> float:
+    """Largest canonical correlation between the column spaces of two signature matrices (M, k)."""
+    qa, ra = np.linalg.qr(a)
+    qb, rb = np.linalg.qr(b)
+    qa = qa[:, np.abs(np.diag(ra)) > 1e-12 * max(np.abs(np.diag(ra)).max(), 1e-300)]
+    qb = qb[:, np.abs(np.diag(rb)) > 1e-12 * max(np.abs(np.diag(rb)).max(), 1e-300)]
+    if qa.shape[1] == 0 or qb.shape[1] == 0:
+        return 0.0
+    return float(np.linalg.svd(qa.T @ qb, compute_uv=False)[0])
 
 
 def _pack(effects: Sequence[CandidateEffect], theta: NDArray) -> NDArray:
@@ -107,6 +163,11 @@ def fit_effects(
     x0_guess: NDArray | None = None,
     outer: int = 3,
     reference: Evaluation | None = None,
+    warm_start: bool = True,
+    diff_step: float = 1e-3,
+    jac: str = "2-point",
+    ftol: float = 1e-8,
+    xtol: float = 1e-6,
 ) -> CandidateFit:
     """Fit the parameters of ``effects`` jointly (others held at ``theta``) by scipy least squares.
 
@@ -116,7 +177,11 @@ def fit_effects(
     run repeated (at most ``outer`` times) while that still lowers the cost. Several
     starting points (``starts``, default the effect's own plus the current values) are
     scored first and the best one is refined. ``reference``: the converged evaluation at
-    ``theta`` if already known.
+    ``theta`` if already known. ``warm_start=False``: every evaluation starts from the
+    reference's window states instead of the best seen so far, so the cost is a
+    deterministic function of the parameters even where a window has several local
+    minima; ``diff_step`` and ``jac``: relative finite-difference step and scheme of the
+    optimizer (larger, central, for a rough cost); ``ftol``, ``xtol``: its tolerances.
     """
     effects = tuple(effects)
     lo = np.concatenate([[b[0] / s for b, s in zip(e.bounds, e.scale)] for e in effects])
@@ -145,7 +210,7 @@ def fit_effects(
         nonlocal nfev
         nfev += 1
         ev = model.evaluate(_unpack(effects, theta, z), x0_guess=warm["x0"], converge=True)
-        if ev.chi2 < warm["chi2"]:
+        if warm_start and ev.chi2 < warm["chi2"]:
             warm["x0"], warm["chi2"] = ev.x0, ev.chi2
         return ev.resid
 
@@ -159,10 +224,12 @@ def fit_effects(
     for _ in range(outer):
         z0 = np.clip(z, lo + 1e-6 * span, hi - 1e-6 * span)  # trf needs a strictly feasible start
         res = optimize.least_squares(
-            fun, z0, bounds=(lo, hi), method="trf", diff_step=1e-3, x_scale=1.0,
-            ftol=1e-8, xtol=1e-6, gtol=1e-10, max_nfev=max_nfev,
+            fun, z0, bounds=(lo, hi), method="trf", jac=jac, diff_step=diff_step, x_scale=1.0,
+            ftol=ftol, xtol=xtol, gtol=1e-10, max_nfev=max_nfev,
         )  # fmt: skip
         ev = model.converged(_unpack(effects, theta, res.x), warm["x0"])
+        if not warm_start:
+            warm["x0"], warm["chi2"] = ev.x0, ev.chi2
         nfev += 1
         if not ev.chi2 < ref.chi2:
             break
@@ -193,14 +260,18 @@ def fit_effects(
 
 
 def score_statistic(
-    model: ResidualModel, effect: CandidateEffect, current: Evaluation, rel_step: float = 0.2
-) -> float:
+    model: ResidualModel, effect: CandidateEffect, current: Evaluation, rel_step: float = 0.2,
+    columns: list | None = None, converged: bool = False,
+) -> float:  # fmt: skip
     """Predicted ``chi2`` reduction of adding ``effect`` (a score / Lagrange-multiplier test).
 
     The residual's sensitivity to each parameter is a secant over ``rel_step`` times the
     parameter's scale (window states refitted); one bounded Gauss-Newton step from the
     absent values predicts the reduction. Under the null it is about ``chi2_k``; it costs
-    ``k`` evaluations where a fit costs tens.
+    ``k`` evaluations where a fit costs tens. If ``columns`` is a list, the sensitivity
+    matrix (M, k) (the effect's *signature* in the residual) is appended to it.
+    ``converged``: the secants re-converge the window states (more accurate when the
+    residual is far from white, at a few times the cost).
     """
     r0 = current.resid
     cols = []
@@ -211,9 +282,14 @@ def score_statistic(
             h = -h
         vals = np.array(effect.absent, dtype=float)
         vals[i] += h
-        ev = model.evaluate(effect.apply(current.theta, vals), jac=current.jac, x0_guess=current.x0)
+        if converged:
+            ev = model.converged(effect.apply(current.theta, vals), current.x0)
+        else:
+            ev = model.evaluate(effect.apply(current.theta, vals), jac=current.jac, x0_guess=current.x0)
         cols.append((ev.resid - r0) / h)
     J = np.column_stack(cols)
+    if columns is not None:
+        columns.append(J)
     g = J.T @ r0
     try:
         delta = -np.linalg.solve(J.T @ J, g)
@@ -263,6 +339,9 @@ def forward_selection(
     screen_keep: int = 2,
     screen_fraction: float = 0.25,
     screen_ratio: float = 0.05,
+    correct_correlation: bool = False,
+    signatures: bool = False,
+    robust_states: bool = False,
 ) -> SelectionResult:
     """Greedy forward selection with a backward check (see module docstring).
 
@@ -272,9 +351,25 @@ def forward_selection(
     acceptance threshold and ``screen_ratio`` of the best score (the fitted reduction of a
     candidate was never more than about twice its score in our tests, so a candidate 20x
     below the best cannot win). Unfitted candidates are reported with their score.
+
+    ``correct_correlation``: every likelihood-ratio statistic is divided by the variance
+    inflation of the residual *with* the candidate (:func:`long_run_variance`; 1 for a
+    white residual), so a real log's correlated residual does not make every small
+    improvement "significant" (used for IMU-only logs). ``signatures``: the round's
+    candidate signatures are compared and the accepted effect gets
+    ``signature_correlation`` with every other candidate (1 = indistinguishable on this log).
+    ``robust_states`` (IMU-only logs, whose window fits can have several local minima): the
+    nominal model starts from several window states, and after a round's fits the current
+    model and every fitted candidate are re-evaluated from all the window states found in
+    the round, best per window (:meth:`.ResidualModel.best_of`), so a likelihood ratio never
+    credits an effect with a better local minimum that the reference could reach as well.
+    It also makes the screen safer for a residual far from white, where the linearised
+    score with fixed-Jacobian window states underestimated a fit tenfold (a steering delay
+    on a real log): scores use converged secants, and a candidate that passed the
+    acceptance test in an earlier round is always fitted again.
     """
     n = model.data.n_measurements
-    nominal = model.converged()
+    nominal = model.nominal_start() if robust_states else model.converged()
     if progress:
         progress("nominal model")
     current = nominal
@@ -282,6 +377,14 @@ def forward_selection(
     values: dict[str, NDArray] = {}
     errors: dict[str, NDArray] = {}
     steps: list[SelectionStep] = []
+    passed_before: set[str] = set()
+    # robust: every evaluation of a fit from the same window states, and finite differences that
+    # see past the small roughness a tabulated or learned tire leaves in the cost
+    fit_options = (
+        {"warm_start": False, "diff_step": 0.01, "jac": "3-point", "max_nfev": 12, "ftol": 1e-6, "xtol": 1e-4}
+        if robust_states
+        else {}
+    )
     for rnd in range(max_effects):
         remaining = [c for c in candidates if c.name not in values]
         if not remaining:
@@ -289,42 +392,74 @@ def forward_selection(
         step = SelectionStep(rnd + 1, current.chi2)
         fits: dict[str, CandidateFit] = {}
         level = alpha / len(remaining)
-        scores = {c.name: score_statistic(model, c, current) for c in remaining}
+        cols: dict[str, NDArray] = {}
+        scores = {}
+        for c in remaining:
+            store: list = []
+            scores[c.name] = score_statistic(
+                model, c, current, columns=store if signatures else None, converged=robust_states
+            )
+            if signatures:
+                cols[c.name] = store[0]
         if progress:
             progress(f"round {rnd + 1}: scores")
         ranked = sorted(remaining, key=lambda c: -scores[c.name])
         top = scores[ranked[0].name]
+        # with the correlation correction the screen compares the score after the current residual's inflation
+        screen_infl = long_run_variance(model.data, current.resid) if correct_correlation else 1.0
         for i, cand in enumerate(ranked):
-            weak = scores[cand.name] < screen_fraction * acceptance_threshold(cand.n_parameters, n, level)
+            weak = scores[cand.name] / screen_infl < screen_fraction * acceptance_threshold(cand.n_parameters, n, level)
             dominated = scores[cand.name] < screen_ratio * top
-            if i >= screen_keep and (weak or dominated):
+            keep = i < screen_keep or (robust_states and cand.name in passed_before)
+            if not keep and (weak or dominated):
                 step.tried[cand.name] = {"score": scores[cand.name], "fitted": False}
                 continue
-            fit = fit_effects(model, [cand], current.theta, reference=current)
+            step.tried[cand.name] = {}  # filled below (keeps the ranked order)
+            fit = fit_effects(model, [cand], current.theta, reference=current, **fit_options)
             fits[cand.name] = fit
-            sig = significance(current.chi2, fit.chi2, cand.n_parameters, n)
-            step.tried[cand.name] = {
+            if progress:
+                progress(cand.name)
+        if robust_states and fits:
+            # every model of the round from every window state found in it, best per window
+            starts = [current.x0] + [f.evaluation.x0 for f in fits.values()]
+            current = model.best_of(current.theta, starts)
+            step.chi2_before = current.chi2
+            for name, f in fits.items():
+                if np.array_equal(f.theta, current.theta):  # the fit stayed at the current model
+                    f.evaluation = current
+                else:
+                    f.evaluation = model.best_of(f.theta, [f.evaluation.x0, current.x0])
+        for name, fit in fits.items():
+            cand = fit.effects[0]
+            infl = long_run_variance(model.data, fit.evaluation.resid) if correct_correlation else None
+            sig = significance(current.chi2, fit.chi2, cand.n_parameters, n, infl)
+            step.tried[name] = {
                 "parameters": cand.as_dict(fit.values[0]),
                 "chi2": fit.chi2,
                 "evaluations": fit.nfev,
-                "score": scores[cand.name],
+                "score": scores[name],
                 "fitted": True,
                 **sig,
             }
-            if progress:
-                progress(cand.name)
         ok = [
             name for name, info in step.tried.items()
             if info["fitted"] and info["p_value"] < level and info["delta_bic"] < 0.0
         ]
+        passed_before |= set(ok)
         if not ok:
             steps.append(step)
             break
         best = min(ok, key=lambda name: step.tried[name]["chi2"])
         step.accepted = best
+        if signatures:
+            step.tried[best]["signature_correlation"] = {
+                name: signature_correlation(cols[best], J) for name, J in cols.items() if name != best
+            }
         accepted.append(fits[best].effects[0])
         # joint refit of every accepted effect
-        joint = fit_effects(model, accepted, fits[best].theta, x0_guess=fits[best].evaluation.x0)
+        joint = fit_effects(model, accepted, fits[best].theta, x0_guess=fits[best].evaluation.x0, **fit_options)
+        if robust_states:
+            joint.evaluation = model.best_of(joint.theta, [joint.evaluation.x0, fits[best].evaluation.x0])
         current = joint.evaluation
         values = {e.name: v for e, v in zip(joint.effects, joint.values)}
         errors = {e.name: s for e, s in zip(joint.effects, joint.stderr)}
@@ -335,8 +470,11 @@ def forward_selection(
                     break
                 others = [a for a in accepted if a is not e]
                 theta_wo = e.apply(current.theta, e.absent)
-                without = fit_effects(model, others, theta_wo, x0_guess=current.x0)
-                sig = significance(without.chi2, current.chi2, e.n_parameters, n)
+                without = fit_effects(model, others, theta_wo, x0_guess=current.x0, **fit_options)
+                if robust_states:
+                    without.evaluation = model.best_of(without.theta, [without.evaluation.x0, current.x0])
+                infl = long_run_variance(model.data, current.resid) if correct_correlation else None
+                sig = significance(without.chi2, current.chi2, e.n_parameters, n, infl)
                 if not (sig["p_value"] < alpha and sig["delta_bic"] < 0.0):
                     accepted.remove(e)
                     step.dropped.append(e.name)

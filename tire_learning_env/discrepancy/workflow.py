@@ -39,9 +39,10 @@ from .diagnostics import (
     gap,
     locate_windows,
     regimes,
+    turn_and_braking,
     whiteness,
 )
-from .effects import LIBRARY, CandidateEffect
+from .effects import IMU_CONFOUNDED, CandidateEffect, library_for
 from .residuals import Evaluation, ResidualModel
 from .selection import SelectionResult, acceptance_threshold, forward_selection
 
@@ -67,9 +68,29 @@ def nominal_tires(
 ) -> tuple[TireModel, TireModel, dict]:
     """Front/rear axle tires of the nominal model and a description.
 
-    ``learned`` runs the neuro-adaptive observer on the log (:func:`~tire_learning_env.observer.estimate`)
-    and uses the learned axle curves.
+    ``learned`` runs the neuro-adaptive observer on the log (:func:`~tire_learning_env.observer.estimate`;
+    for an IMU-only log the IMU variant :func:`~tire_learning_env.imu.estimate_imu`) and uses the
+    learned axle curves (final pass). Only the curves are used: the observer's state
+    estimates (e.g. its causal sideslip) never enter the comparison.
     """
+    if tire == "learned" and log.kind == "imu":
+        from ..imu import ImuConfig, estimate_imu
+
+        s = log.sensors
+        rows = {k: np.asarray(s[k], dtype=float) for k in ("t", "delta", "vx", "ay", "yaw_rate")}
+        result = estimate_imu(rows, vehicle, ImuConfig())
+        cf, cr = result.cornering_stiffness()
+        front = CallableTire(lambda a: result.axle_force(a, "front"), "learned front (IMU observer)")
+        rear = CallableTire(lambda a: result.axle_force(a, "rear"), "learned rear (IMU observer)")
+        h = math.radians(1.0)
+        secant = {a: float((result.axle_force(h, a) - result.axle_force(-h, a)) / (2 * h)) for a in ("front", "rear")}
+        return front, rear, {
+            "kind": "learned",
+            "learner": "IMU neuro-adaptive observer (tire_learning_env.imu.estimate_imu), final warm-started pass; "
+            "only its axle curves are used, never its state estimates",
+            "cornering_stiffness_per_tire": {"front": cf, "rear": cr},
+            "secant_pm1deg_per_axle_N_per_rad": secant,
+        }
     if tire == "linear":
         return LinearTire(2.0 * vehicle.Cf), LinearTire(2.0 * vehicle.Cr), {"kind": "linear"}
     if tire == "pacejka":
@@ -133,6 +154,8 @@ class DiscrepancyResult:
     source: str
     runtime_s: float
     notes: list[str] = field(default_factory=list)
+    turn_braking_before: dict | None = None
+    turn_braking_after: dict | None = None
 
     @property
     def gap_ratio(self) -> float:
@@ -140,16 +163,38 @@ class DiscrepancyResult:
         return _ratio(self.gap_before.normalised_band_rms["all"], self.gap_after.normalised_band_rms["all"])
 
     def gap_ratios(self) -> dict:
-        """Ratios per channel: band RMS, raw RMS, and the normalised camera / all figures."""
+        """Ratios per channel: band RMS, raw RMS, and the normalised camera (or IMU) / all figures."""
         b, a = self.gap_before, self.gap_after
         out = {
             "band": {k: _ratio(b.band_rms[k], a.band_rms[k]) for k in b.band_rms},
             "raw": {k: _ratio(b.rms[k], a.rms[k]) for k in b.rms},
             "normalised_band": {
-                k: _ratio(b.normalised_band_rms[k], a.normalised_band_rms[k]) for k in ("camera", "all")
+                k: _ratio(b.normalised_band_rms[k], a.normalised_band_rms[k])
+                for k in ("camera", "imu", "all")
+                if k in b.normalised_band_rms
             },
         }
         return out
+
+    def _method_text(self) -> str:
+        cfg = self.config
+        if self.data.kind == "imu":
+            return (
+                "IMU-only log: the body-frame bicycle model (states vy, r; inputs the logged delta, the time-varying "
+                f"vx and a smoothed ax) is compared with the measured yaw rate and lateral acceleration. The log is cut "
+                f"into windows of about {cfg.window:g} s; in each the model runs open loop from an initial state "
+                "[vy, r] at the window's first row, fitted to that window's own measurements (descent Gauss-Newton, "
+                "kept physical); the residual is measurement minus simulation, weighted by each channel's noise "
+                "level. No state estimate of any observer is used as a measurement. The gap is the residual's RMS, "
+                "raw and in the vehicle-dynamics band (0.5 s centred moving average within each window)."
+            )
+        return (
+            f"The log is cut into windows of about {cfg.window:g} s; in each the model runs open loop on the "
+            f"logged delta, vx and kappa from an initial state fitted to that window's own measurements "
+            f"(simulation starts {cfg.preroll:g} s before the window's first measurement); the residual is "
+            "measurement minus simulation, weighted by each channel's noise level. The gap is its RMS, raw "
+            "and in the vehicle-dynamics band (0.5 s centred moving average within each window)."
+        )
 
     def to_json(self) -> dict[str, Any]:
         """The ``report.json`` document."""
@@ -178,13 +223,7 @@ class DiscrepancyResult:
             "gap_after_partial": None if self.gap_after_partial is None else self.gap_after_partial.to_dict(),
             "comparison": {
                 "method": "multiple-shooting output error",
-                "description": (
-                    f"The log is cut into windows of about {cfg.window:g} s; in each the model runs open loop on the "
-                    f"logged delta, vx and kappa from an initial state fitted to that window's own measurements "
-                    f"(simulation starts {cfg.preroll:g} s before the window's first measurement); the residual is "
-                    "measurement minus simulation, weighted by each channel's noise level. The gap is its RMS, raw "
-                    "and in the vehicle-dynamics band (0.5 s centred moving average within each window)."
-                ),
+                "description": self._method_text(),
                 "window_s": cfg.window,
                 "preroll_s": cfg.preroll,
                 "windows": d.n_windows,
@@ -194,10 +233,15 @@ class DiscrepancyResult:
                 "noise_sigma_estimated": {
                     c: float(d.sigma_estimated[i]) for i, c in enumerate(CHANNELS) if c in d.channels
                 },
-                "steering_between_rows": cfg.steering,
+                "steering_between_rows": cfg.steering if d.kind == "camera" else _imu_steering(cfg),
+                **({"model": "body-frame bicycle model (states vy, r)", "primary_channels": ["yaw_rate", "ay"],
+                    "preroll_s": 0.0,
+                    "ax_input": "slope of vx (0.1 s centred moving average) + slow part (1 s) of logged ax - slope"}
+                   if d.kind == "imu" else {}),
             },
             "nominal_model": {"vehicle": self.vehicle.to_dict(), "tire": self.tire},
             "log": {
+                **({"kind": "imu"} if d.kind == "imu" else {}),
                 "source": self.source,
                 "rows": int(len(d.t)),
                 "duration_s": float(d.t[-1] - d.t[0]),
@@ -225,15 +269,41 @@ class DiscrepancyResult:
                 "regimes_after": self.regimes_after,
                 "cross_correlation_before": self.cross_correlation_before,
                 "cross_correlation_after": self.cross_correlation_after,
+                **({"turn_and_braking_before": self.turn_braking_before,
+                    "turn_and_braking_with_accepted_effects": self.turn_braking_after}
+                   if self.turn_braking_before is not None else {}),
             },
             "library": [
-                {"name": e.name, "parameters": e.units_dict(), "description": e.description} for e in LIBRARY
+                {"name": e.name, "parameters": e.units_dict(), "description": e.description}
+                for e in library_for(d.kind)
             ],
-            "verdict_rules": VERDICT_RULES,
+            **({"identifiability": _identifiability_doc()} if d.kind == "imu" else {}),
+            "verdict_rules": VERDICT_RULES if d.kind == "camera" else VERDICT_RULES.replace(
+                "camera portmanteau test", "portmanteau test of the yaw_rate and ay residuals"
+            ),
             "config": cfg.to_dict(),
             "runtime_s": self.runtime_s,
             "notes": self.notes,
         }
+
+
+def _imu_steering(cfg: DiscrepancyConfig) -> str:
+    return "linear" if cfg.steering == "curvature" else cfg.steering
+
+
+def _identifiability_doc() -> list[dict]:
+    return [{"effects": sorted(pair), "why": why} for pair, why in IMU_CONFOUNDED.items()] + [
+        {
+            "effects": ["lateral_load_transfer", "nominal tire curve"],
+            "why": "the load-transfer loss is a function of a_y, which rises with slip: a tire curve learned from the "
+            "same log as a function of slip (--tire learned) already contains most of it",
+        },
+        {
+            "effects": ["crosswind"],
+            "why": "not in the IMU library: on a closed track the car's heading turns through any wind every lap, so a "
+            "constant body-frame side force is not a wind; a constant one would equal road_bank + ay_bias",
+        },
+    ]
 
 
 def _ratio(before: float, after: float) -> float:
@@ -243,8 +313,9 @@ def _ratio(before: float, after: float) -> float:
 
 
 def _effect_entry(
-    effect: CandidateEffect, values: NDArray, stderr: NDArray, evidence: dict, channels: tuple[str, ...]
-) -> dict:
+    effect: CandidateEffect, values: NDArray, stderr: NDArray, evidence: dict, channels: tuple[str, ...],
+    kind: str = "camera",
+) -> dict:  # fmt: skip
     entry = {
         "name": effect.name,
         "parameters": effect.as_dict(values),
@@ -253,6 +324,30 @@ def _effect_entry(
         "description": effect.description,
         "evidence": evidence,
     }
+    if kind == "imu":
+        theory = {next(iter(pair - {effect.name})): why for pair, why in IMU_CONFOUNDED.items() if effect.name in pair}
+        corr = evidence.get("signature_correlation", {})
+        lr = float(evidence.get("likelihood_ratio", 0.0))
+        limit = float(evidence.get("acceptance_threshold", 0.0))
+        # the part of the effect's likelihood ratio that another candidate cannot reproduce, to first
+        # order: LR (1 - rho^2); below the acceptance threshold the log cannot tell the two apart
+        separation = {n: lr * (1.0 - c * c) for n, c in corr.items()}
+        close = sorted((n for n in corr if separation[n] < limit), key=lambda n: -corr[n])
+        if theory:
+            entry["evidence"]["confounded_in_theory_with"] = theory
+        if corr:
+            entry["evidence"]["separation_from"] = {
+                n: separation[n] for n in sorted(corr, key=lambda n: separation[n])[:5]
+            }
+        if close:
+            entry["evidence"]["indistinguishable_from"] = close[0] if len(close) == 1 else close
+            entry["evidence"]["note"] = (
+                f"on this log the signature of {effect.name} correlates at "
+                + ", ".join(f"{corr[n]:.3f} with {n}" for n in close)
+                + f": the part of its likelihood ratio the other cannot reproduce, LR (1 - rho^2), is below the "
+                f"acceptance threshold {limit:.3g}; the data cannot tell them apart, the name is the better fit, "
+                "not a proof"
+            )
     if "yaw_rate" not in channels and "ay" not in channels:
         for pair in _EQUIVALENT_WITHOUT_IMU:
             if effect.name in pair:
@@ -300,10 +395,17 @@ def analyze(
     vehicle = vehicle or VehicleParams()
     if tire not in TIRE_CHOICES:
         raise ParameterError(f"tire must be one of {TIRE_CHOICES}, got {tire!r}")
-    data = prepare(log, config)
     notes: list[str] = []
-    candidates = [c for c in LIBRARY if not c.needs_speed_variation or data.speed_variation >= config.speed_variation]
-    skipped = [c.name for c in LIBRARY if c not in candidates]
+    if log.kind == "imu":
+        from ..imu import clean_imu_log
+
+        # checks (units, signs, uniform sampling) and causal cleaning of steering / yaw-rate spikes, reported
+        log, cleaning = clean_imu_log(log, vehicle)
+        notes += [f"IMU log cleaning: {n}" for n in cleaning.notes()]
+    data = prepare(log, config)
+    library = library_for(data.kind)
+    candidates = [c for c in library if not c.needs_speed_variation or data.speed_variation >= config.speed_variation]
+    skipped = [c.name for c in library if c not in candidates]
     if skipped:
         notes.append(
             f"{skipped} not tried: the speed varies by only {100 * data.speed_variation:.1f} % "
@@ -325,7 +427,17 @@ def analyze(
             bar.update(1)
 
         bar.set_postfix_str("selection")
-        sel = forward_selection(model, candidates, config.alpha, config.max_effects, progress=tick)
+        imu = data.kind == "imu"
+        correct = config.correlation_correction == "on" or (config.correlation_correction == "auto" and imu)
+        sel = forward_selection(
+            model, candidates, config.alpha, config.max_effects, progress=tick, correct_correlation=correct,
+            signatures=imu, robust_states=imu,
+        )  # fmt: skip
+        if correct:
+            notes.append(
+                "likelihood-ratio statistics are divided by the residual's variance inflation from its correlation "
+                "in time (Bartlett long-run variance over 1 s, floored at 1; lr_raw and inflation in each candidate)"
+            )
         bar.set_postfix_str("whiteness")
         rng = np.random.default_rng(config.seed)
         lag_span = config.whiteness_lags
@@ -342,7 +454,7 @@ def analyze(
         entries = []
         for e, values, stderr in sel.accepted:
             ev = _evidence(sel, e, n, config)
-            entries.append(_effect_entry(e, values, stderr, ev, data.channels))
+            entries.append(_effect_entry(e, values, stderr, ev, data.channels, data.kind))
         if sel.accepted and white_final:
             verdict, effects, partial = "found", entries, []
             gap_after, gap_partial, final = gap_final, None, sel.final
@@ -392,6 +504,9 @@ def analyze(
             runtime_s=0.0,
             notes=notes,
         )
+        if imu:
+            result.turn_braking_before = turn_and_braking(data, sel.nominal)
+            result.turn_braking_after = turn_and_braking(data, sel.final) if sel.accepted else None
         bar.update(1)
     finally:
         bar.close()
@@ -417,6 +532,11 @@ def _evidence(sel: SelectionResult, effect: CandidateEffect, n: int, config: Dis
                 "acceptance_threshold": acceptance_threshold(k, n, config.alpha / len(st.tried)),
                 "runner_up": None,
             }
+            if "inflation" in info:
+                out["likelihood_ratio_raw"] = info["lr_raw"]
+                out["inflation"] = info["inflation"]
+            if "signature_correlation" in info:
+                out["signature_correlation"] = info["signature_correlation"]
             if runner is not None:
                 out["runner_up"] = {
                     "name": runner,
