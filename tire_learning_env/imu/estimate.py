@@ -431,7 +431,10 @@ def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: ImuCo
             "aerodynamic downforce, roll and camber, combined slip under braking/traction, tire relaxation",
             "sensor biases as states: a force or sideslip offset is not identifiable from (a_y, r); F(0) = 0 is imposed",
         ],
-        "discrepancy_workflow": "not run here (issue item 6 is implemented separately)",
+        "discrepancy_workflow": (
+            "run separately: tire-learning discrepancy LOG.csv --vehicle V.json --tire learned --out DIR "
+            "(docs/real_car_discrepancy.md)"
+        ),
     }
     beta_ref = reference_beta(cleaned.truth, rows["vx"])
     data = measured_tire_data(cleaned.sensors, cleaned.truth, vehicle)
