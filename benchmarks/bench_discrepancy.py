@@ -93,12 +93,12 @@ def make_log(effects: dict, seed: int = 1, rate: float = 100.0, duration: float 
         return read_log(path)
 
 
-def parameter_errors(result, truth: dict) -> dict:
+def parameter_errors(result, truth: dict, kind: str = "camera") -> dict:
     """Relative error [%] of each fitted parameter's deviation from 'absent' (None if not named)."""
     found = {e["name"]: e for e in result.effects}
     out = {}
     for name, values in truth.items():
-        eff = get_effect(name)
+        eff = get_effect(name, kind)
         true_dev = eff.size(values)
         if name not in found:
             out[name] = None
@@ -114,12 +114,24 @@ def parameter_errors(result, truth: dict) -> dict:
     return out
 
 
-def score(result, truth: dict, expected_verdict: str = "found") -> dict:
+def score(result, truth: dict, expected_verdict: str = "found", kind: str = "camera") -> dict:
+    """Verdict, names, parameter errors and gap ratios of one run (``kind``: the log's library)."""
     names = sorted(e["name"] for e in result.effects)
-    errors = parameter_errors(result, truth) if truth else {}
+    errors = parameter_errors(result, truth, kind) if truth else {}
     worst = max((v for e in errors.values() if e for v in e.values()), default=None)
     ratios = result.gap_ratios()
-    return {
+    if kind == "camera":
+        channel_ratios = {
+            "gap_ratio_camera_band": round(ratios["normalised_band"]["camera"], 3),
+            "gap_ratio_camera_raw_e1": round(ratios["raw"]["e1"], 3),
+            "gap_ratio_camera_raw_e2": round(ratios["raw"]["e2"], 3),
+        }
+    else:
+        channel_ratios = {
+            "gap_ratio_band": {k: round(v, 3) for k, v in ratios["band"].items()},
+            "gap_ratio_raw": {k: round(v, 3) for k, v in ratios["raw"].items()},
+        }
+    out = {
         "verdict": result.verdict,
         "named": names,
         "partial": sorted(e["name"] for e in result.partial_effects),
@@ -128,14 +140,15 @@ def score(result, truth: dict, expected_verdict: str = "found") -> dict:
         "parameter_error_pct": errors,
         "worst_parameter_error_pct": worst,
         "gap_ratio_all_channels": round(result.gap_ratio, 3),
-        "gap_ratio_camera_band": round(ratios["normalised_band"]["camera"], 3),
-        "gap_ratio_camera_raw_e1": round(ratios["raw"]["e1"], 3),
-        "gap_ratio_camera_raw_e2": round(ratios["raw"]["e2"], 3),
+        **channel_ratios,
         "whiteness_p_before": result.whiteness_before.p_value,
         "whiteness_p_after": result.whiteness_after.p_value,
-        "runtime_s": round(result.runtime_s, 2),
-        "evaluations": result.selection.n_evaluations,
     }
+    if kind == "imu":
+        out["indistinguishable_from"] = {e["name"]: e["evidence"].get("indistinguishable_from") for e in result.effects}
+    out["runtime_s"] = round(result.runtime_s, 2)
+    out["evaluations"] = result.selection.n_evaluations
+    return out
 
 
 def suite_accuracy(rates=(100.0, 20.0)) -> dict:
@@ -331,57 +344,17 @@ def analyze_imu(log):
     return analyze(log, REVS_LIKE_VEHICLE, "pacejka", progress=False, tire_params=TireParams(mu=1.4))
 
 
-def imu_parameter_errors(result, truth: dict) -> dict:
-    found = {e["name"]: e for e in result.effects}
-    out = {}
-    for name, values in truth.items():
-        eff = get_effect(name, "imu")
-        if name not in found:
-            out[name] = None
-            continue
-        true_dev = eff.size(values)
-        fit_dev = eff.size([found[name]["parameters"][p] for p in eff.parameters])
-        ref = np.max(np.abs(true_dev))
-        out[name] = {p: float(100.0 * abs(f - t) / (abs(t) if t != 0 else ref))
-                     for p, t, f in zip(eff.parameters, true_dev, fit_dev)}  # fmt: skip
-    return out
-
-
-def score_imu(result, truth: dict, expected: str = "found") -> dict:
-    names = sorted(e["name"] for e in result.effects)
-    errors = imu_parameter_errors(result, truth) if truth else {}
-    worst = max((v for e in errors.values() if e for v in e.values()), default=None)
-    ratios = result.gap_ratios()
-    return {
-        "verdict": result.verdict,
-        "named": names,
-        "partial": sorted(e["name"] for e in result.partial_effects),
-        "correct": result.verdict == expected and names == sorted(truth),
-        "parameters": {e["name"]: e["parameters"] for e in result.effects},
-        "parameter_error_pct": errors,
-        "worst_parameter_error_pct": worst,
-        "gap_ratio_all_channels": round(result.gap_ratio, 3),
-        "gap_ratio_band": {k: round(v, 3) for k, v in ratios["band"].items()},
-        "gap_ratio_raw": {k: round(v, 3) for k, v in ratios["raw"].items()},
-        "whiteness_p_before": result.whiteness_before.p_value,
-        "whiteness_p_after": result.whiteness_after.p_value,
-        "indistinguishable_from": {e["name"]: e["evidence"].get("indistinguishable_from") for e in result.effects},
-        "runtime_s": round(result.runtime_s, 2),
-        "evaluations": result.selection.n_evaluations,
-    }
-
-
 def suite_imu(seeds: int) -> dict:
     out: dict = {"single": {}, "two_effects": {}, "out_of_library": {}}
     for label, (hidden, truth) in IMU_CASES.items():
-        out["single"][label] = s = score_imu(analyze_imu(make_imu_log(hidden)), truth)
+        out["single"][label] = s = score(analyze_imu(make_imu_log(hidden)), truth, kind="imu")
         print(f"[imu] {label}: {s['verdict']} {s['named']} err {s['worst_parameter_error_pct']} "
               f"ratio {s['gap_ratio_all_channels']}", file=sys.stderr)  # fmt: skip
     for label, (hidden, truth) in IMU_TWO_EFFECT_CASES.items():
-        out["two_effects"][label] = s = score_imu(analyze_imu(make_imu_log(hidden)), truth)
+        out["two_effects"][label] = s = score(analyze_imu(make_imu_log(hidden)), truth, kind="imu")
         print(f"[imu] {label}: {s['verdict']} {s['named']} err {s['worst_parameter_error_pct']}", file=sys.stderr)
     for label, hidden in IMU_OUT_OF_LIBRARY.items():
-        out["out_of_library"][label] = s = score_imu(analyze_imu(make_imu_log(hidden)), {}, expected="unexplained")
+        out["out_of_library"][label] = s = score(analyze_imu(make_imu_log(hidden)), {}, expected_verdict="unexplained", kind="imu")
         print(f"[imu] {label}: {s['verdict']} partial {s['partial']}", file=sys.stderr)
     clean = []
     for seed in range(seeds):
