@@ -65,6 +65,8 @@ from ._model import (
     TH_STEER_OFFSET,
     TH_STEER_QUICK,
     TH_YAW_BIAS,
+    fill_nan_after,
+    substep_count,
 )
 
 # per-row outputs of simulate_body_rows: columns 4..11 mean what they mean in _model (OUT_*)
@@ -221,13 +223,7 @@ def simulate_body_rows(x0, j0, j1, t, delta, dslope, vx, ax, veh, tf, tr, tabf, 
         out[k, OUT_LAG_R] = lar if sigma > RELAX_MIN else ar
         if last:
             break
-        n_sub = int(math.ceil(dt / h_max - 1e-9))
-        if sigma > RELAX_MIN:
-            n_fast = int(math.ceil(dt * max(vx[j], vx[j + 1]) / sigma / 1.5))
-            if n_fast > n_sub:
-                n_sub = n_fast
-        if n_sub < 1:
-            n_sub = 1
+        n_sub = substep_count(dt, h_max, sigma, max(vx[j], vx[j + 1]))
         h = dt / n_sub
         dd = dslope[j] * dt
         dv = vx[j + 1] - vx[j]
@@ -268,9 +264,7 @@ def simulate_body_rows(x0, j0, j1, t, delta, dslope, vx, ax, veh, tf, tr, tabf, 
             laf = laf + c * (c1 + 2.0 * c2 + 2.0 * c3 + c4)
             lar = lar + c * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
         if not (math.isfinite(vy) and math.isfinite(r) and abs(vy) < 1e3 and abs(r) < 1e2):
-            for kk in range(k + 1, n):
-                for qq in range(N_OUT):
-                    out[kk, qq] = math.nan
+            fill_nan_after(out, k, n)
             return False
     return True
 

@@ -123,6 +123,26 @@ def model_rhs(e1d, e2, e2d, laf, lar, delta, vx, ax, pdd, pddd, veh, tf, tr, tab
 
 
 @njit(cache=True, nogil=True)
+def substep_count(dt, h_max, sigma, v_max):
+    """RK4 sub-steps for an interval ``dt`` [s]: steps of at most ``h_max`` [s], more when a slip
+    lag (relaxation length ``sigma`` [m] at speeds up to ``v_max`` [m/s]) is faster; at least one."""
+    n_sub = int(math.ceil(dt / h_max - 1e-9))
+    if sigma > RELAX_MIN:
+        n_fast = int(math.ceil(dt * v_max / sigma / 1.5))
+        if n_fast > n_sub:
+            n_sub = n_fast
+    return n_sub if n_sub >= 1 else 1
+
+
+@njit(cache=True, nogil=True)
+def fill_nan_after(out, k, n):
+    """Mark rows ``k + 1 .. n - 1`` of a simulation output as NaN (the state blew up at row ``k``)."""
+    for kk in range(k + 1, n):
+        for q in range(out.shape[1]):
+            out[kk, q] = math.nan
+
+
+@njit(cache=True, nogil=True)
 def simulate_rows(x0, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, out):
     """Simulate rows ``j0..j1`` (inclusive) from the error state ``x0`` (4,) at row ``j0``.
 
@@ -170,13 +190,7 @@ def simulate_rows(x0, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr
         out[k, OUT_LAG_R] = lar if sigma > RELAX_MIN else ar
         if last:
             break
-        n_sub = int(math.ceil(dt / h_max - 1e-9))
-        if sigma > RELAX_MIN:
-            n_fast = int(math.ceil(dt * max(vx[j], vx[j + 1]) / sigma / 1.5))
-            if n_fast > n_sub:
-                n_sub = n_fast
-        if n_sub < 1:
-            n_sub = 1
+        n_sub = substep_count(dt, h_max, sigma, max(vx[j], vx[j + 1]))
         h = dt / n_sub
         dd = dslope[j] * dt
         dv = vx[j + 1] - vx[j]
@@ -217,9 +231,7 @@ def simulate_rows(x0, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr
             laf = laf + c * (c1 + 2.0 * c2 + 2.0 * c3 + c4)
             lar = lar + c * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
         if not (math.isfinite(e1) and math.isfinite(e1d) and math.isfinite(e2) and math.isfinite(e2d)):
-            for kk in range(k + 1, n):
-                for q in range(N_OUT):
-                    out[kk, q] = math.nan
+            fill_nan_after(out, k, n)
             return False
     return True
 
