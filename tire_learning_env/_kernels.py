@@ -224,6 +224,28 @@ def driver_steer(e1, e2, kappa, vx, dt, drv, dstate):
     return delta
 
 
+@njit(cache=True, inline="always")
+def record_tick(out, j, t, delta, vx, ax, kappa, p0, q0, delivered, f1, f2, r, ay, af, ar, Fyf, Fyr, s):
+    """Fill row ``j`` of a tick log (:data:`LOG_COLUMNS`) except the true state (columns 11-14,
+    written before the step); camera columns are NaN when no frame was delivered."""
+    out[j, 0] = t
+    out[j, 1] = delta
+    out[j, 2] = vx
+    out[j, 3] = ax
+    out[j, 4] = kappa
+    out[j, 5] = p0
+    out[j, 6] = q0
+    out[j, 7] = f1 if delivered else math.nan
+    out[j, 8] = f2 if delivered else math.nan
+    out[j, 9] = r
+    out[j, 10] = ay
+    out[j, 15] = af
+    out[j, 16] = ar
+    out[j, 17] = Fyf
+    out[j, 18] = Fyr
+    out[j, 19] = s
+
+
 @njit(cache=True)
 def advance_bicycle(
     n_ticks, dt, tick0, state, s0, vx, ax, veh, tf, tr, tabf, tabr, eff,
@@ -268,21 +290,6 @@ def advance_bicycle(
         )  # fmt: skip
         if not (math.isfinite(state[0]) and math.isfinite(state[1]) and math.isfinite(state[2]) and math.isfinite(state[3])):
             return s, delta, j  # caller raises with the time and state
-        out[j, 0] = t
-        out[j, 1] = delta
-        out[j, 2] = vx
-        out[j, 3] = ax
-        out[j, 4] = k0
-        out[j, 5] = p0
-        out[j, 6] = q0
-        out[j, 7] = f1 if delivered else math.nan
-        out[j, 8] = f2 if delivered else math.nan
-        out[j, 9] = r
-        out[j, 10] = ay
-        out[j, 15] = af
-        out[j, 16] = ar
-        out[j, 17] = Fyf
-        out[j, 18] = Fyr
-        out[j, 19] = s
+        record_tick(out, j, t, delta, vx, ax, k0, p0, q0, delivered, f1, f2, r, ay, af, ar, Fyf, Fyr, s)
         s = s_end
     return s, delta, n_ticks

@@ -37,6 +37,7 @@ from .._kernels import (
     bicycle_rk4_step,
     camera_tick,
     driver_steer,
+    record_tick,
 )
 
 __all__ = [
@@ -202,22 +203,7 @@ def advance_ego(
             math.isfinite(state[0]) and math.isfinite(state[1]) and math.isfinite(state[2]) and math.isfinite(state[3])
         ):
             return s, vx, delta, j, STOP_BLOWUP
-        out[j, 0] = t
-        out[j, 1] = delta
-        out[j, 2] = vx
-        out[j, 3] = ax
-        out[j, 4] = k0
-        out[j, 5] = p0
-        out[j, 6] = q0
-        out[j, 7] = f1 if delivered else math.nan
-        out[j, 8] = f2 if delivered else math.nan
-        out[j, 9] = r
-        out[j, 10] = ay
-        out[j, 15] = af
-        out[j, 16] = ar
-        out[j, 17] = Fyf
-        out[j, 18] = Fyr
-        out[j, 19] = s
+        record_tick(out, j, t, delta, vx, ax, k0, p0, q0, delivered, f1, f2, r, ay, af, ar, Fyf, Fyr, s)
         s = s_end
         vx = vx_end
     return s, vx, delta, n_ticks, STOP_DONE
