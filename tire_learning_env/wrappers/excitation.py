@@ -707,13 +707,9 @@ def make_excitation_env(
     """
     from ..envs.lane_keeping import LaneKeepingEnv
 
-    cfg = _as(ExcitationConfig, config, "config")
-    kwargs = {"road": "straight", "camera": EXCITATION_CAMERA, **env_kwargs}
-    kwargs["max_steering_offset"] = cfg.max_steering_offset
-    base = LaneKeepingEnv(**kwargs)
-    rnd = TruthRandomization() if randomization is True else (None if randomization is False else randomization)
-    est = EstimatorWrapper(base, config=observer_config, keep_history=keep_history)
-    return ExcitationWrapper(est, config=cfg, randomization=rnd, record=record, info_logs=info_logs)
+    defaults = {"road": "straight", "camera": EXCITATION_CAMERA}
+    return _wrap(LaneKeepingEnv, defaults, env_kwargs, config, randomization, observer_config, record, keep_history,
+                 info_logs)  # fmt: skip
 
 
 def make_highway_excitation_env(
@@ -735,10 +731,16 @@ def make_highway_excitation_env(
     """
     from ..envs.highway import HighwayTrafficEnv
 
+    defaults = {"camera": EXCITATION_CAMERA, "lane_change": "off"}
+    return _wrap(HighwayTrafficEnv, defaults, env_kwargs, config, randomization, observer_config, record, keep_history,
+                 info_logs)  # fmt: skip
+
+
+def _wrap(env_cls, defaults, env_kwargs, config, randomization, observer_config, record, keep_history, info_logs):
+    """Base env (``defaults`` overridden by ``env_kwargs``; the steering-offset range from the
+    config) -> :class:`EstimatorWrapper` -> :class:`ExcitationWrapper`."""
     cfg = _as(ExcitationConfig, config, "config")
-    kwargs = {"camera": EXCITATION_CAMERA, "lane_change": "off", **env_kwargs}
-    kwargs["max_steering_offset"] = cfg.max_steering_offset
-    base = HighwayTrafficEnv(**kwargs)
+    base = env_cls(**{**defaults, **env_kwargs, "max_steering_offset": cfg.max_steering_offset})
     rnd = TruthRandomization() if randomization is True else (None if randomization is False else randomization)
     est = EstimatorWrapper(base, config=observer_config, keep_history=keep_history)
     return ExcitationWrapper(est, config=cfg, randomization=rnd, record=record, info_logs=info_logs)
