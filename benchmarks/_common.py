@@ -31,6 +31,22 @@ def median_time(fn: Callable[[], object], repeats: int = 5) -> float:
     return statistics.median(times)
 
 
+def time_env_steps(env, action, seconds: float, warmup: int = 20) -> tuple[int, float]:
+    """Step ``env`` with a fixed ``action`` for about ``seconds`` of wall time after ``warmup``
+    steps (compilation, caches) and a ``reset(seed=0)``; returns (steps, elapsed s)."""
+    for _ in range(warmup):
+        env.step(action)
+    env.reset(seed=0)
+    n = 0
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        _, _, term, trunc, _ = env.step(action)
+        n += 1
+        if term or trunc:
+            env.reset()
+    return n, time.perf_counter() - t0
+
+
 def emit(result: dict) -> None:
     """Print the result as JSON with the machine it ran on."""
     result["machine"] = {"python": sys.version.split()[0], "platform": platform.platform(), "cpu_count": os.cpu_count()}

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import time
 
-from _common import emit, median_time, pin_to_one_core
+from _common import emit, median_time, pin_to_one_core, time_env_steps
 
 pin_to_one_core()
 
@@ -50,17 +50,8 @@ def env_rate(env_id: str, seconds: float = 3.0) -> float:
     env.reset(seed=0)
     per_step = env.unwrapped.ticks_per_step
     action = np.zeros(1, dtype=np.float32)
-    for _ in range(20):
-        env.step(action)
-    env.reset(seed=0)
-    n = 0
-    t0 = time.perf_counter()
-    while time.perf_counter() - t0 < seconds:
-        _, _, term, trunc, _ = env.step(action)
-        n += 1
-        if term or trunc:
-            env.reset()
-    return n * per_step / (time.perf_counter() - t0)
+    n, elapsed = time_env_steps(env, action, seconds)
+    return n * per_step / elapsed
 
 
 def main() -> None:

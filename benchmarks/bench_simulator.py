@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 
-from _common import emit, median_time, pin_to_one_core
+from _common import emit, median_time, pin_to_one_core, time_env_steps
 
 pin_to_one_core()
 
@@ -35,17 +35,7 @@ def env_physics_rate(env_id: str, seconds: float = 3.0, **kwargs) -> tuple[float
     else:  # highway-env: simulation_frequency / policy_frequency physics steps per env step
         per_step = unwrapped.config["simulation_frequency"] // unwrapped.config["policy_frequency"]
     action = np.zeros(env.action_space.shape, dtype=np.float32)
-    for _ in range(20):  # warm-up (compilation, caches)
-        env.step(action)
-    env.reset(seed=0)
-    n = 0
-    t0 = time.perf_counter()
-    while time.perf_counter() - t0 < seconds:
-        _, _, term, trunc, _ = env.step(action)
-        n += 1
-        if term or trunc:
-            env.reset()
-    elapsed = time.perf_counter() - t0
+    n, elapsed = time_env_steps(env, action, seconds)
     return n * per_step / elapsed, n / elapsed
 
 
