@@ -259,7 +259,7 @@ def test_logs_follow_the_error_state_model_of_spec_1(cls):
     """Row to row, the truth obeys SPEC §1 with the logged inputs (psi_dot_des = vx kappa)."""
     env = cls(config={"lane_change": "action", "vehicles_count": 0})
     env.reset(seed=1)
-    sensors, truth, infos = [], [], []
+    sensors, truth = [], []
     base, switch_rows = 0, []
     change = 2 if env.target_lane[2] == 0 else 1
     for k in range(300):
@@ -402,28 +402,7 @@ def test_traffic_is_recycled_around_the_ego_on_long_runs():
 # -- plants, rendering, wrappers ---------------------------------------------------------------
 
 
-class PythonOnlyPlant:
-    """The same plant without its compiled parameters: forces the Python tick loop."""
-
-    def __init__(self, plant):
-        self._p = plant
-        self.vehicle = plant.vehicle
-
-    @property
-    def state(self):
-        return self._p.state
-
-    def reset(self, xi=None):
-        self._p.reset(xi)
-
-    def step(self, *args):
-        return self._p.step(*args)
-
-    def output(self):
-        return self._p.output()
-
-
-def test_compiled_and_python_loops_give_the_same_log_through_handovers_and_lane_changes():
+def test_compiled_and_python_loops_give_the_same_log_through_handovers_and_lane_changes(python_only_plant):
     from tire_learning_env.dynamics import BicyclePlant
     from tire_learning_env.tires import axle_tires
 
@@ -433,7 +412,7 @@ def test_compiled_and_python_loops_give_the_same_log_through_handovers_and_lane_
 
         def factory(v, python=python):
             plant = BicyclePlant(v, *axle_tires(v))
-            return PythonOnlyPlant(plant) if python else plant
+            return python_only_plant(plant) if python else plant
 
         env = RacetrackTrafficEnv(camera=cam, plant_factory=factory, config={"lane_change": "action", "vehicles_count": 0})
         env.reset(seed=2)

@@ -8,24 +8,6 @@ from tire_learning_env.simulation import Simulator, simulate
 from tire_learning_env.tires import CallableTire, PacejkaTire, axle_tires
 
 
-class PythonOnlyPlant:
-    """The same plant without its compiled parameters: forces Simulator's Python loop."""
-
-    def __init__(self, plant):
-        self._p = plant
-        self.vehicle = plant.vehicle
-
-    @property
-    def state(self):
-        return self._p.state
-
-    def reset(self, xi=None):
-        self._p.reset(xi)
-
-    def step(self, *args):
-        return self._p.step(*args)
-
-
 @pytest.mark.parametrize(
     "camera, effects",
     [
@@ -36,10 +18,10 @@ class PythonOnlyPlant:
         ),
     ],
 )
-def test_compiled_and_python_loops_give_the_same_log(camera, effects):
+def test_compiled_and_python_loops_give_the_same_log(camera, effects, python_only_plant):
     v = VehicleParams()
     logs = []
-    for wrap in (lambda p: p, PythonOnlyPlant):
+    for wrap in (lambda p: p, python_only_plant):
         plant = wrap(BicyclePlant(v, *axle_tires(v), effects))
         sim = Simulator(plant, make_road("lane_changes"), camera, DriverParams())
         sim.reset(np.random.default_rng(5))
