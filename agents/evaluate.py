@@ -16,6 +16,10 @@ to ``--out``:
   first seed against the truth, and their error,
 - ``figures/excitation_error_vs_time.png``: the median tire-curve error over time.
 
+Every policy drives with the env's predictive a_y safety filter (``ExcitationConfig.safety_filter``,
+on by default); the scripted manoeuvres, tuned without it, are also driven without it
+(rows "(no filter)"), and the best scripted row of either kind is the one to beat.
+
 Metrics: ``tire_curve_nrmse`` per axle over the fixed target slip range (``|alpha| <=``
 the slip of steady nominal cornering at the a_y limit: 1.01 deg front, 0.70 deg rear at
 4 m/s^2), the true slip range excited (0.5/99.5 % quantiles), the time after which the
@@ -61,19 +65,21 @@ def load_baselines(path: Path) -> list[Any]:
     return [make_manoeuvre(m["name"], **m["params"]) for m in data["manoeuvres"]]
 
 
-def evaluate_policy(name: str, act: Callable, road, seeds: list[int], duration: float, kind: str) -> dict[str, Any]:
+def evaluate_policy(
+    name: str, act: Callable, road, seeds: list[int], duration: float, kind: str, safety_filter: bool = True
+) -> dict[str, Any]:
     from tire_learning_env.scripted import run_policy
-    from tire_learning_env.wrappers.excitation import make_excitation_env
+    from tire_learning_env.wrappers.excitation import ExcitationConfig, make_excitation_env
 
-    env = make_excitation_env(road=road)
+    env = make_excitation_env(config=ExcitationConfig(safety_filter=safety_filter), road=road)
     t0 = time.perf_counter()
     episodes = []
     for s in seeds:
         r = run_policy(act, seed=s, duration=duration, env=env)
         r["final_weights"] = env.observer.weights.tolist()
         episodes.append(r)
-    return {"name": name, "kind": kind, "episodes": episodes, "aggregate": aggregate(episodes),
-            "seconds": time.perf_counter() - t0}  # fmt: skip
+    return {"name": name, "kind": kind, "safety_filter": bool(safety_filter), "episodes": episodes,
+            "aggregate": aggregate(episodes), "seconds": time.perf_counter() - t0}  # fmt: skip
 
 
 def aggregate(episodes: list[dict[str, Any]]) -> dict[str, Any]:
@@ -105,6 +111,7 @@ def aggregate(episodes: list[dict[str, Any]]) -> dict[str, Any]:
         "max_abs_e1": float(max(e["max_abs_e1"] for e in episodes)),
         "max_abs_ay": float(max(e["max_abs_ay"] for e in episodes)),
         "ay_violation_steps": int(sum(e["ay_violation_steps"] for e in episodes)),
+        "filter_active_fraction": float(sum(e["filter_active_steps"] for e in episodes) / sum(e["steps"] for e in episodes)),
         "max_steering_rate": float(max(e["max_steering_rate"] for e in episodes)),
         "information_gain": stats([e["information_gain"] for e in episodes]),
         "return": stats([e["return"] for e in episodes]),
@@ -118,7 +125,8 @@ def target_check(results: list[dict[str, Any]], ay_limit: float) -> dict[str, An
     if not scripted:
         return {}
     best = min(scripted, key=lambda r: r["aggregate"]["tire_curve_nrmse_max"]["mean"])
-    out = {"best_scripted": best["name"], "policies": {}}
+    best_name = best["name"] + ("" if best.get("safety_filter", True) else " (no filter)")
+    out = {"best_scripted": best_name, "policies": {}}
     for r in learned:
         a, b = r["aggregate"], best["aggregate"]
         per_seed_wins = sum(
@@ -150,12 +158,14 @@ def markdown(results: list[dict[str, Any]], check: dict[str, Any], meta: dict[st
         f"the fixed target range |α_f| ≤ {meta['target_slip_deg']['front']:.2f}°, |α_r| ≤ "
         f"{meta['target_slip_deg']['rear']:.2f}° (mean ± std over seeds, in %). Excited slip: true 0.5/99.5 % "
         f"quantiles (mean over seeds). a_y: the IMU at 1 kHz, max over all seeds; steps above the limit counted "
-        f"over all {len(meta['seeds'])} × {int(round(meta['duration_s'] * 20))} policy steps.",
+        f"over all {len(meta['seeds'])} × {int(round(meta['duration_s'] * 20))} policy steps. Safety filter: the env's "
+        f"predictive a_y filter (`ExcitationConfig.safety_filter`, on by default) changed the offset on the given share of "
+        f"steps; rows marked 'no filter' drive without it (scripted manoeuvres are tuned without it).",
         "",
         "| policy | NRMSE front [%] | NRMSE rear [%] | NRMSE worse axle [%] | excited α_f [deg] | excited α_r [deg] "
         "| t(err < 5 %) median [s] | never < 5 % | lane violations (steps / departures) "
-        "| max abs(a_y) [m/s²] (steps above the limit) | max steering rate [rad/s] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| max abs(a_y) [m/s²] (steps above the limit) | max steering rate [rad/s] | filter active [% of steps] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
         a = r["aggregate"]
@@ -163,14 +173,17 @@ def markdown(results: list[dict[str, Any]], check: dict[str, Any], meta: dict[st
         conv = a["convergence_time_s"]["median"]
         conv_s = "—" if conv is None or not math.isfinite(conv) else f"{conv:.1f}"
         label = f"**{r['name']}** (learned)" if r["kind"] == "learned" else r["name"]
+        label += "" if r.get("safety_filter", True) else " (no filter)"
+        active = f"{100 * a['filter_active_fraction']:.1f}" if r.get("safety_filter", True) else "—"
         lines.append(
             f"| {label} | {ms(a['tire_curve_nrmse']['front'])} | {ms(a['tire_curve_nrmse']['rear'])} "
             f"| {ms(a['tire_curve_nrmse_max'])} | [{ef[0]:.2f}, {ef[1]:.2f}] | [{er[0]:.2f}, {er[1]:.2f}] | {conv_s} "
             f"| {a['convergence_time_s']['never']}/{len(a['seeds'])} | {a['lane_violation_steps']} / {a['departures']} "
-            f"| {a['max_abs_ay']:.2f} ({a['ay_violation_steps']}) | {a['max_steering_rate']:.3f} |"
+            f"| {a['max_abs_ay']:.2f} ({a['ay_violation_steps']}) | {a['max_steering_rate']:.3f} | {active} |"
         )
     if check:
-        lines += ["", f"Best scripted baseline (lowest mean worse-axle NRMSE): **{check['best_scripted']}**.", ""]
+        lines += ["", f"Best scripted baseline (lowest mean worse-axle NRMSE, with or without the filter, whether "
+                      f"or not it kept the limits itself): **{check['best_scripted']}**.", ""]
         for name, c in check["policies"].items():
             verdict = "met" if c["target_met"] else "NOT met"
             lines.append(
@@ -183,7 +196,8 @@ def markdown(results: list[dict[str, Any]], check: dict[str, Any], meta: dict[st
 
 
 def plot(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
-    """Recovered curves on the first seed and the median error over time, per policy."""
+    """Recovered curves on the first seed and the median error over time, per policy (rows with the filter)."""
+    results = [r for r in results if r.get("safety_filter", True)] or results
     import matplotlib
 
     matplotlib.use("Agg")
@@ -281,6 +295,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=60.0, help="driving time per episode [s]")
     parser.add_argument("--out", type=Path, default=REPO_DIR / "docs", help="output directory")
     parser.add_argument("--no-figures", action="store_true")
+    parser.add_argument("--baseline-filter", choices=("both", "on", "off"), default="both",
+                        help="drive the scripted manoeuvres with the safety filter, without it, or both (default)")
     args = parser.parse_args(argv)
 
     from tire_learning_env.roads import StraightRoad
@@ -296,13 +312,17 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_baselines:
         dt = 1.0 / 20.0
         max_offset = ExcitationConfig().max_steering_offset
-        for m in load_baselines(args.baselines):
-            def act(obs, k, m=m):
-                return m.offset(k * dt) / max_offset
+        filters = {"both": (True, False), "on": (True,), "off": (False,)}[args.baseline_filter]
+        for filtered in filters:
+            for m in load_baselines(args.baselines):
+                def act(obs, k, m=m):
+                    return m.offset(k * dt) / max_offset
 
-            results.append(evaluate_policy(m.name, act, m.road(), args.seeds, args.duration, "scripted"))
-            results[-1]["manoeuvre"] = m.describe()
-            print(f"{m.name:16s} worse-axle NRMSE {100 * results[-1]['aggregate']['tire_curve_nrmse_max']['mean']:.2f} %", flush=True)
+                results.append(evaluate_policy(m.name, act, m.road(), args.seeds, args.duration, "scripted", filtered))
+                results[-1]["manoeuvre"] = m.describe()
+                label = m.name + ("" if filtered else " (no filter)")
+                print(f"{label:28s} worse-axle NRMSE {100 * results[-1]['aggregate']['tire_curve_nrmse_max']['mean']:.2f} %",
+                      flush=True)  # fmt: skip
     if not results:
         parser.error("nothing to evaluate: give --policies and/or baselines")
     env = make_excitation_env()
@@ -312,6 +332,8 @@ def main(argv: list[str] | None = None) -> int:
         "duration_s": args.duration,
         "ay_limit": env.config.ay_limit,
         "lane_margin": env.config.lane_margin,
+        "safety_filter": {k: getattr(env.config, k) for k in ("safety_filter", "safety_stiffness_uncertainty",
+                                                              "safety_horizon", "safety_noise_sigmas")},
         "target_slip_deg": {a: math.degrees(v) for a, v in zip(("front", "rear"), env.target)},
         "versions": versions(),
     }

@@ -2,8 +2,9 @@
 
 - ``env_steps_per_s``: ``TireLearning-Excitation-v0`` (1 kHz truth physics, 30 Hz camera,
   the observer's RLS update and the information reward, 20 Hz policy) stepped with
-  random actions, one process, one core; also the pieces (base env alone, base env +
-  observer) so the wrapper's own cost is visible.
+  random actions, one process, one core, safety filter on (the default); also the
+  pieces (base env alone, base env + observer, the task without the safety filter) so
+  the wrapper's and the filter's own costs are visible.
 - ``ppo_train_steps_per_s`` / ``sac_train_steps_per_s``: ``model.learn`` throughput
   (env steps per wall second, data collection and gradient updates together) with the
   settings of ``agents/configs/ppo.json`` / ``sac.json`` (2 envs in one process, torch
@@ -92,13 +93,17 @@ def main() -> None:
                                  keep_history=False)  # fmt: skip
     )
     excitation = env_rate(lambda: gym.make("TireLearning-Excitation-v0", record=False))
+    unfiltered = env_rate(
+        lambda: gym.make("TireLearning-Excitation-v0", record=False, config={"safety_filter": False})
+    )
     ppo = train_rate("ppo.json", steps=12_000)
     sac = train_rate("sac.json", steps=2_000, warmup=1_000)
     emit(
         {
             "benchmark": "excitation",
             "env_steps_per_s": round(excitation, 1),
-            "env_pieces_steps_per_s": {"base_env": round(base, 1), "base_env_plus_observer": round(with_observer, 1)},
+            "env_pieces_steps_per_s": {"base_env": round(base, 1), "base_env_plus_observer": round(with_observer, 1),
+                                       "excitation_without_safety_filter": round(unfiltered, 1)},
             "env_simulated_seconds_per_wall_second": round(excitation / 20.0, 1),
             "ppo_train_steps_per_s": round(ppo, 1),
             "sac_train_steps_per_s": round(sac, 1),

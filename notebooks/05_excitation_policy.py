@@ -19,11 +19,14 @@
 # a straight road; its reward is the information the observer gains about the tire-curve
 # weights over a target slip range (computable on a real car, from the observer's own
 # covariance), minus penalties for the lateral-acceleration limit (4 m/s^2), the lane margin
-# and the steering rate. Each seed draws a truth tire the observer does not know.
+# and the steering rate. Each seed draws a truth tire the observer does not know. A safety
+# filter (on by default) passes every offset through a robust a_y prediction and a per-tick
+# IMU guard, so the limit holds whatever the policy asks for.
 #
 # Here: a very short PPO run (a few thousand steps, about a minute), then the committed
-# policy (`agents/policies/ppo_excitation.zip`, 1.2 M steps, ~12 min; see `agents/README.md`)
-# against two scripted manoeuvres tuned to the same limit, on a short budget.
+# policy (`agents/policies/ppo_excitation.zip`, the validation-best checkpoint at 950 k steps of
+# a 16 min run; see `agents/README.md`) against two scripted manoeuvres tuned to the same
+# limit, on a short budget.
 
 # %%
 from pathlib import Path

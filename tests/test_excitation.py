@@ -135,7 +135,7 @@ def test_reward_grows_when_the_same_drive_excites_a_wider_slip_range():
 
 
 def test_lane_departure_and_ay_limit_are_penalised():
-    env = make_excitation_env()
+    env = make_excitation_env(config=ExcitationConfig(safety_filter=False))  # the filter would prevent both
     total, terms, info = _drive(env, np.ones(200))  # hard left until the car leaves the lane
     assert info["excitation"]["penalty_departure"] == env.config.departure_penalty
     assert terms["penalty_lane"] >= env.config.violation_penalty  # |e1_hat| beyond the margin before leaving

@@ -402,7 +402,8 @@ def test_traffic_is_recycled_around_the_ego_on_long_runs():
 # -- plants, rendering, wrappers ---------------------------------------------------------------
 
 
-def test_compiled_and_python_loops_give_the_same_log_through_handovers_and_lane_changes(python_only_plant):
+@pytest.mark.parametrize("guard", [False, True])
+def test_compiled_and_python_loops_give_the_same_log_through_handovers_and_lane_changes(guard, python_only_plant):
     from tire_learning_env.dynamics import BicyclePlant
     from tire_learning_env.tires import axle_tires
 
@@ -415,6 +416,8 @@ def test_compiled_and_python_loops_give_the_same_log_through_handovers_and_lane_
             return python_only_plant(plant) if python else plant
 
         env = RacetrackTrafficEnv(camera=cam, plant_factory=factory, config={"lane_change": "action", "vehicles_count": 0})
+        if guard:  # the lane change's a_y is clamped: the guard runs in both loops alike
+            env.driver.set_ay_guard(1.0, 100.0, 160.0)
         env.reset(seed=2)
         out = []
         for k in range(160):  # 8 s: joins and a lane change

@@ -6,6 +6,7 @@ from tire_learning_env.params import CameraParams, DriverParams, VehicleParams
 from tire_learning_env.roads import make_road
 from tire_learning_env.simulation import Simulator, simulate
 from tire_learning_env.tires import CallableTire, PacejkaTire, axle_tires
+from tire_learning_env.wrappers.excitation import ExcitationConfig
 
 
 @pytest.mark.parametrize(
@@ -18,12 +19,15 @@ from tire_learning_env.tires import CallableTire, PacejkaTire, axle_tires
         ),
     ],
 )
-def test_compiled_and_python_loops_give_the_same_log(camera, effects, python_only_plant):
+@pytest.mark.parametrize("guard", [False, True])
+def test_compiled_and_python_loops_give_the_same_log(camera, effects, guard, python_only_plant):
     v = VehicleParams()
     logs = []
     for wrap in (lambda p: p, python_only_plant):
         plant = wrap(BicyclePlant(v, *axle_tires(v), effects))
         sim = Simulator(plant, make_road("lane_changes"), camera, DriverParams())
+        if guard:  # tight enough to act in this drive
+            sim.driver.set_ay_guard(1.5, 100.0, 160.0)
         sim.reset(np.random.default_rng(5))
         chunks = [sim.advance(50, steering_offset=0.003 * k) for k in range(40)]
         logs.append(chunks)
@@ -32,6 +36,27 @@ def test_compiled_and_python_loops_give_the_same_log(camera, effects, python_onl
             np.testing.assert_allclose(a.sensors[key], b.sensors[key], rtol=1e-12, atol=1e-14, equal_nan=True)
         for key in a.truth:
             np.testing.assert_allclose(a.truth[key], b.truth[key], rtol=1e-12, atol=1e-14)
+
+
+def test_ay_guard_clamps_the_steering_at_every_tick():
+    """A 0.05 rad steering-offset step reaches about 6.7 m/s^2 at once; with the guard the IMU a_y
+    never exceeds its limit, and it is off by default."""
+    v = VehicleParams()
+    gain = 2 * v.Cf / v.m
+    peaks = {}
+    for guard in (False, True):
+        sim = Simulator(BicyclePlant(v, *axle_tires(v)), make_road("straight"), CameraParams(), DriverParams())
+        if guard:
+            sim.driver.set_ay_guard(3.0, 0.8 * gain, 1.2 * gain)
+        sim.reset(np.random.default_rng(0))
+        logs = [sim.advance(50, steering_offset=0.05 if k < 20 else -0.05) for k in range(40)]
+        peaks[guard] = max(float(np.max(np.abs(log.sensors["ay"]))) for log in logs)
+    assert peaks[False] > 5.0
+    # the guard acts on the last IMU reading, so a_y may move on by one tick of the lateral
+    # dynamics (1 ms): ExcitationConfig.safety_tick_margin (0.05 m/s^2) is that room
+    assert peaks[True] <= 3.0 + ExcitationConfig().safety_tick_margin
+    with pytest.raises(ValueError, match="gain_low"):
+        sim.driver.set_ay_guard(3.0, 2.0, 1.0)
 
 
 def test_camera_rate_latency_and_dropouts():

@@ -50,6 +50,10 @@ CAMC_NOISE, CAMC_HEAD, CAMC_COUNT = range(3)
 # driver parameter vector: gain, lookahead time, integral gain, max steering, L, K_us, lr, lf m/(2 Cr L)
 DRV_GAIN, DRV_TLA, DRV_KI, DRV_MAX, DRV_L, DRV_KUS, DRV_LR, DRV_E2COEF = range(8)
 N_DRIVER = 8
+#: Layout of the steering a_y guard (:func:`guard_steering`): limit [m/s^2] (inf: off), lowest and
+#: highest steering-to-a_y gain [m/s^2/rad], the last IMU a_y [m/s^2].
+GUARD_LIMIT, GUARD_GAIN_LOW, GUARD_GAIN_HIGH, GUARD_AY = range(4)
+N_GUARD = 4
 # one row of a simulation log
 LOG_COLUMNS = (
     "t", "delta", "vx", "ax", "kappa", "psi_dot_des", "psi_ddot_des", "e1", "e2", "yaw_rate", "ay",
@@ -225,6 +229,34 @@ def driver_steer(e1, e2, kappa, vx, dt, drv, dstate):
 
 
 @njit(cache=True, inline="always")
+def guard_steering(delta, delta_prev, guard):
+    """Steering [rad] after the IMU a_y guard.
+
+    The change from ``delta_prev`` is clamped so that the last measured a_y plus the change
+    times any gain in ``[gain_low, gain_high]`` stays within the limit (an a_y beyond it is
+    steered back). It clamps the total steering, driver included: the limit is hard.
+    ``guard[GUARD_LIMIT]`` inf: no guard.
+    """
+    limit = guard[GUARD_LIMIT]
+    if not limit < math.inf:
+        return delta
+    a = guard[GUARD_AY]
+    g_lo = guard[GUARD_GAIN_LOW]
+    g_hi = guard[GUARD_GAIN_HIGH]
+    room_up = limit - a
+    room_down = -limit - a
+    hi = delta_prev + (room_up / g_hi if room_up >= 0.0 else room_up / g_lo)
+    lo = delta_prev + (room_down / g_hi if room_down <= 0.0 else room_down / g_lo)
+    if lo > hi:  # far beyond the limit (|a| > limit (g_hi + g_lo) / (g_hi - g_lo)): steer back the harder way
+        return hi if a > 0.0 else lo
+    if delta > hi:
+        return hi
+    if delta < lo:
+        return lo
+    return delta
+
+
+@njit(cache=True, inline="always")
 def record_tick(out, j, t, delta, vx, ax, kappa, p0, q0, delivered, f1, f2, r, ay, af, ar, Fyf, Fyr, s):
     """Fill row ``j`` of a tick log (:data:`LOG_COLUMNS`) except the true state (columns 11-14,
     written before the step); camera columns are NaN when no frame was delivered."""
@@ -250,12 +282,13 @@ def record_tick(out, j, t, delta, vx, ax, kappa, p0, q0, delivered, f1, f2, r, a
 def advance_bicycle(
     n_ticks, dt, tick0, state, s0, vx, ax, veh, tf, tr, tabf, tabr, eff,
     road_k, road_dk, road_ds, cam, cstate, counters, pending, noise, drop,
-    drv, dstate, steering_offset, steering, last_delta, out,
+    drv, dstate, guard, steering_offset, steering, last_delta, out,
 ):  # fmt: skip
-    """Run ``n_ticks`` ticks of camera -> driver -> RK4 plant; fill ``out`` (n_ticks, N_LOG).
+    """Run ``n_ticks`` ticks of camera -> driver -> a_y guard -> RK4 plant; fill ``out`` (n_ticks, N_LOG).
 
     ``steering`` NaN means the driver steers (plus ``steering_offset``); otherwise it is
-    the full road-wheel angle. Returns ``(s, last_delta)`` at the end.
+    the full road-wheel angle. ``guard`` is the steering a_y guard (:func:`guard_steering`;
+    its last-a_y entry is updated). Returns ``(s, last_delta)`` at the end.
     """
     s = s0
     max_steer = drv[DRV_MAX]
@@ -269,10 +302,12 @@ def advance_bicycle(
         s_end = s + 0.5 * dt * (vx + vx_end)
         k2, dk2 = road_lookup(s_end, road_k, road_dk, road_ds)
         delivered, f1, f2 = camera_tick(t, state[0], state[2], cam, cstate, counters, pending, noise, drop)
+        delta_prev = delta
         if steering != steering:
             delta = driver_steer(cstate[CAMS_LATEST_E1], cstate[CAMS_LATEST_E2], k0, vx, dt, drv, dstate) + steering_offset
         else:
             delta = steering
+        delta = guard_steering(min(max(delta, -max_steer), max_steer), delta_prev, guard)
         if delta > max_steer:
             delta = max_steer
         elif delta < -max_steer:
@@ -290,6 +325,7 @@ def advance_bicycle(
         )  # fmt: skip
         if not (math.isfinite(state[0]) and math.isfinite(state[1]) and math.isfinite(state[2]) and math.isfinite(state[3])):
             return s, delta, j  # caller raises with the time and state
+        guard[GUARD_AY] = ay
         record_tick(out, j, t, delta, vx, ax, k0, p0, q0, delivered, f1, f2, r, ay, af, ar, Fyf, Fyr, s)
         s = s_end
     return s, delta, n_ticks

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._kernels import driver_steer
+from ._kernels import GUARD_AY, GUARD_GAIN_HIGH, GUARD_GAIN_LOW, GUARD_LIMIT, N_GUARD, driver_steer
 from .params import DriverParams, VehicleParams
 
 __all__ = ["LaneKeepingDriver", "driver_vector"]
@@ -54,10 +54,38 @@ class LaneKeepingDriver:
         self.vehicle = vehicle
         self.param_vec = driver_vector(params, vehicle)
         self.state = np.zeros(1)
+        self.guard = np.zeros(N_GUARD)
+        self.guard[GUARD_LIMIT] = np.inf
 
     def reset(self) -> None:
-        """Zero the integral state."""
+        """Zero the integral state and the a_y guard's last IMU reading."""
         self.state[0] = 0.0
+        self.guard[GUARD_AY] = 0.0
+
+    def set_ay_guard(self, limit: float, gain_low: float, gain_high: float) -> None:
+        """Turn on the steering a_y guard (:func:`~tire_learning_env._kernels.guard_steering`).
+
+        Every physics tick, the change of the total steering (driver plus offset) is
+        clamped so that the last IMU ``a_y`` plus the change times any steering-to-``a_y``
+        gain in ``[gain_low, gain_high]`` stays within ``+/-limit`` (an ``a_y`` beyond
+        the limit is steered back). It clamps the total steering, the driver's included:
+        the limit is hard, also on a curve that would need more. ``limit = inf`` turns it
+        off.
+
+        Parameters
+        ----------
+        limit : float
+            Lateral-acceleration limit [m/s^2].
+        gain_low, gain_high : float
+            Bounds of the instantaneous steering-to-``a_y`` gain ``2 C_f / m`` [m/s^2/rad].
+        """
+        if not limit > 0:
+            raise ValueError(f"guard limit must be > 0, got {limit!r}")
+        if not 0 < gain_low <= gain_high < np.inf:
+            raise ValueError(f"need 0 < gain_low <= gain_high < inf, got {gain_low!r}, {gain_high!r}")
+        self.guard[GUARD_LIMIT] = limit
+        self.guard[GUARD_GAIN_LOW] = gain_low
+        self.guard[GUARD_GAIN_HIGH] = gain_high
 
     def steer(self, e1: float, e2: float, kappa: float, vx: float, dt: float) -> float:
         """Road-wheel angle [rad] from measured ``e1`` [m], ``e2`` [rad] and curvature [1/m].

@@ -321,10 +321,14 @@ def tune_amplitude(
 
     Bisection over :attr:`Manoeuvre.amplitude_bounds` on the tuning ``seeds`` (keep them
     apart from evaluation seeds); every candidate is run on every seed (``**kwargs`` go
-    to :func:`run_manoeuvre`). A manoeuvre without amplitude is returned as is.
+    to :func:`run_manoeuvre`; without a ``config`` the manoeuvre runs without the safety
+    filter, so that it keeps the limits by itself). A manoeuvre without amplitude is
+    returned as is.
     """
     cfg = kwargs.get("config")
-    cfg = ExcitationConfig() if cfg is None else (cfg if isinstance(cfg, ExcitationConfig) else ExcitationConfig.from_dict(cfg))
+    if cfg is None:  # the manoeuvre itself must respect the limits: no safety filter to lean on
+        cfg = kwargs["config"] = ExcitationConfig(safety_filter=False)
+    cfg = cfg if isinstance(cfg, ExcitationConfig) else ExcitationConfig.from_dict(cfg)
     ay_cap, e1_cap = fraction * cfg.ay_limit, lane_fraction * cfg.lane_margin
 
     def worst(m: Manoeuvre) -> tuple[float, float]:

@@ -22,7 +22,7 @@ from typing import Callable, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from ._kernels import LOG_COLUMNS, N_LOG, advance_bicycle, road_lookup
+from ._kernels import GUARD_AY, LOG_COLUMNS, N_LOG, advance_bicycle, guard_steering, road_lookup
 from .driver import LaneKeepingDriver
 from .dynamics import BicyclePlant, PlantEffects
 from .params import CameraParams, DriverParams, ParameterError, RoadParams, TireParams, VehicleParams
@@ -225,7 +225,7 @@ class Simulator:
         s, delta, done = advance_bicycle(
             n_ticks, self.dt, self.tick_index, self.plant.state, self.s, vx, ax, *self.plant.kernel_params(),
             self.table.kappa, self.table.dkappa, self.table.ds, *self.camera.kernel_args(),
-            self.driver.param_vec, self.driver.state, float(steering_offset),
+            self.driver.param_vec, self.driver.state, self.driver.guard, float(steering_offset),
             math.nan if steering is None else float(steering), self.last_delta, out,
         )  # fmt: skip
         if done < n_ticks:
@@ -254,10 +254,12 @@ class Simulator:
             k2, dk2 = self.table.lookup(s_end)
             state = plant.state
             frame = cam.tick(t, state[0], state[2])
+            delta_prev = delta
             if steering is None:
                 delta = drv.steer(*cam.latest, k0, vx, dt) + steering_offset
             else:
                 delta = steering
+            delta = guard_steering(min(max(delta, -max_steer), max_steer), delta_prev, drv.guard)
             delta = min(max(delta, -max_steer), max_steer)
             p0, q0 = vx * k0, vx * vx * dk0 + ax * k0
             out[j, 11:15] = state[:4]
@@ -269,6 +271,7 @@ class Simulator:
                 vx,
                 ax,
             )
+            drv.guard[GUARD_AY] = ay
             e1f, e2f = frame if frame is not None else (math.nan, math.nan)
             out[j, :11] = (t, delta, vx, ax, k0, p0, q0, e1f, e2f, r, ay)
             out[j, 15:] = (af, ar, Fyf, Fyr, s)

@@ -721,8 +721,8 @@ class _TrafficEnv(gym.Env):
                 s, vx, delta, done, status = advance_ego(
                     left, self.dt, tick0, self.plant.state, self.s, self.vx, self.ax, *self.plant.kernel_params(),
                     ks, kv, kcum, s_stop, self.curvature_preview, *self.camera.kernel_args(),
-                    self.driver.param_vec, self.driver.state, float(offset), float(steering), self.last_delta,
-                    lc_offset, lc_s0, lc_len, chunk,
+                    self.driver.param_vec, self.driver.state, self.driver.guard, float(offset), float(steering),
+                    self.last_delta, lc_offset, lc_s0, lc_len, chunk,
                 )  # fmt: skip
             else:
                 s, vx, delta, done, status = advance_ego_python(

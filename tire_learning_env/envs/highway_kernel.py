@@ -34,9 +34,11 @@ from .._kernels import (
     CAMS_LATEST_E1,
     CAMS_LATEST_E2,
     DRV_MAX,
+    GUARD_AY,
     bicycle_rk4_step,
     camera_tick,
     driver_steer,
+    guard_steering,
     record_tick,
 )
 
@@ -148,9 +150,9 @@ def _driver_inputs(s, e1_meas, e2_meas, kappa, lc_offset, lc_s0, lc_len):
 def advance_ego(
     n_ticks, dt, tick0, state, s0, vx0, ax, veh, tf, tr, tabf, tabr, eff,
     ks, kv, kcum, s_stop, preview_time, cam, cstate, counters, pending, noise, drop,
-    drv, dstate, steering_offset, steering, last_delta, lc_offset, lc_s0, lc_len, out,
+    drv, dstate, guard, steering_offset, steering, last_delta, lc_offset, lc_s0, lc_len, out,
 ):  # fmt: skip
-    """Run up to ``n_ticks`` ticks of camera -> driver -> RK4 plant; fill ``out`` rows.
+    """Run up to ``n_ticks`` ticks of camera -> driver -> a_y guard -> RK4 plant; fill ``out`` rows.
 
     Stops before a tick that starts at ``s >= s_stop`` (hand-over to the next lane). The
     driver's curvature feed-forward is the mean over ``preview_time * vx`` metres centred on ``s``.
@@ -178,12 +180,14 @@ def advance_ego(
         s_end = s + 0.5 * dt * (vx + vx_end)
         k2, dk2 = knot_lookup(s_end, ks, kv)
         delivered, f1, f2 = camera_tick(t, state[0], state[2], cam, cstate, counters, pending, noise, drop)
+        delta_prev = delta
         if steering != steering:
             kp = preview_curvature(s, preview_time * vx, ks, kv, kcum)
             e1d, e2d, kff = _driver_inputs(s, cstate[CAMS_LATEST_E1], cstate[CAMS_LATEST_E2], kp, lc_offset, lc_s0, lc_len)
             delta = driver_steer(e1d, e2d, kff, vx, dt, drv, dstate) + steering_offset
         else:
             delta = steering
+        delta = guard_steering(min(max(delta, -max_steer), max_steer), delta_prev, guard)
         if delta > max_steer:
             delta = max_steer
         elif delta < -max_steer:
@@ -203,6 +207,7 @@ def advance_ego(
             math.isfinite(state[0]) and math.isfinite(state[1]) and math.isfinite(state[2]) and math.isfinite(state[3])
         ):
             return s, vx, delta, j, STOP_BLOWUP
+        guard[GUARD_AY] = ay
         record_tick(out, j, t, delta, vx, ax, k0, p0, q0, delivered, f1, f2, r, ay, af, ar, Fyf, Fyr, s)
         s = s_end
         vx = vx_end
@@ -232,6 +237,7 @@ def advance_ego_python(
         k2, dk2 = knot_lookup(s_end, ks, kv)
         state = plant.state
         frame = camera.tick(t, state[0], state[2])
+        delta_prev = delta
         if steering != steering:
             e1m, e2m = camera.latest
             kp = preview_curvature(s, preview_time * vx, ks, kv, kcum)
@@ -239,6 +245,7 @@ def advance_ego_python(
             delta = driver.steer(e1d, e2d, kff, vx, dt) + steering_offset
         else:
             delta = steering
+        delta = guard_steering(min(max(delta, -max_steer), max_steer), delta_prev, driver.guard)
         delta = min(max(delta, -max_steer), max_steer)
         p0, q0 = vx * k0, vx * vx * dk0 + ax * k0
         out[j, 11:15] = state[:4]
@@ -255,6 +262,7 @@ def advance_ego_python(
             return s, vx, delta, j, STOP_BLOWUP
         if not np.all(np.isfinite(plant.state[:4])):
             return s, vx, delta, j, STOP_BLOWUP
+        driver.guard[GUARD_AY] = ay
         e1f, e2f = frame if frame is not None else (math.nan, math.nan)
         out[j, :11] = (t, delta, vx, ax, k0, p0, q0, e1f, e2f, r, ay)
         out[j, 15:] = (af, ar, Fyf, Fyr, s)

@@ -49,6 +49,20 @@ one at the limit):
 The quadratic ramp lets a policy use the last tenth of a limit at a growing price; the
 step penalty beyond it is larger than the information of fifty late-episode steps.
 
+Safety filter (on by default)
+-----------------------------
+Penalties teach a policy to respect the limits, they do not guarantee it. With
+``safety_filter=True`` every requested offset first passes
+:class:`~tire_learning_env.wrappers.safety.LateralAccelerationFilter`: the nearest offset
+for which the car's own linear model, closed with its lane-keeping driver, predicts
+``|a_y|`` below the limit (minus a camera-noise margin) over 2 s at the four corners of the
++/-20 % front/rear cornering-stiffness box, with the offset released or held after the step.
+Inside the step, a per-tick guard on the total steering keeps the IMU ``a_y`` within the
+limit whatever the driver does with a noisy frame. Both use only the observer's state
+estimate, the driver's state, the IMU and the nominal vehicle. ``info["excitation"]``
+reports the requested and applied offsets; the observation's "previous action" is the
+applied one.
+
 The **fixed target slip range** defaults to the slip the nominal linear bicycle model
 needs for steady cornering at the lateral-acceleration limit,
 ``alpha_f* = a_lim m lr / (L 2 Cf)``, ``alpha_r* = a_lim m lf / (L 2 Cr)``
@@ -92,6 +106,7 @@ from ..observer import ObserverConfig
 from ..params import CameraParams, ParameterError, TireParams, VehicleParams, _Params
 from ..tires import PacejkaTire
 from .estimator import EstimatorWrapper
+from .safety import LateralAccelerationFilter
 
 __all__ = [
     "ExcitationConfig",
@@ -200,6 +215,27 @@ class ExcitationConfig(_Params):
     target_slip_front, target_slip_rear : float
         Target slip range half-widths [rad]; 0 (default) means :func:`target_slip_range`
         of the nominal vehicle at ``ay_limit``.
+    safety_filter : bool
+        Pass every requested offset through the predictive ``|a_y|`` filter
+        (:class:`~tire_learning_env.wrappers.safety.LateralAccelerationFilter`) before the
+        car applies it.
+    safety_stiffness_uncertainty : float
+        Relative half-width of the per-axle cornering-stiffness box the filter must be
+        safe for [-] (0.2: the truth randomisation's +/-20 %).
+    safety_horizon : float
+        The filter's prediction horizon [s].
+    safety_noise_sigmas : float
+        The filter's margin below ``ay_limit`` in standard deviations of the ``a_y`` the
+        driver's reaction to camera noise causes [-].
+    safety_tick_margin : float
+        The per-tick IMU guard keeps ``|a_y|`` below ``ay_limit`` minus this [m/s^2] (room
+        for the change of ``a_y`` within one physics tick).
+    safety_lane : bool
+        Let the filter also keep the predicted ``|e1|`` within ``lane_margin`` (off by
+        default: the lane is the policy's task, penalised by the reward).
+
+    The filter's margin (``safety_noise_sigmas`` camera-noise standard deviations) must
+    stay below ``ay_limit``; the filter raises naming both when it does not.
     """
 
     ay_limit: float = 4.0  # [m/s^2]
@@ -219,6 +255,12 @@ class ExcitationConfig(_Params):
     episode_time: float = 60.0  # [s]
     target_slip_front: float = 0.0  # [rad]
     target_slip_rear: float = 0.0  # [rad]
+    safety_filter: bool = True
+    safety_stiffness_uncertainty: float = 0.2  # [-]
+    safety_horizon: float = 2.0  # [s]
+    safety_noise_sigmas: float = 2.0  # [-]
+    safety_tick_margin: float = 0.05  # [m/s^2]
+    safety_lane: bool = False
 
     _positive: ClassVar[tuple[str, ...]] = (
         "ay_limit",
@@ -228,6 +270,7 @@ class ExcitationConfig(_Params):
         "information_scale",
         "truth_scale",
         "episode_time",
+        "safety_horizon",
     )
     _non_negative: ClassVar[tuple[str, ...]] = (
         "ay_penalty",
@@ -237,6 +280,9 @@ class ExcitationConfig(_Params):
         "departure_penalty",
         "target_slip_front",
         "target_slip_rear",
+        "safety_stiffness_uncertainty",
+        "safety_noise_sigmas",
+        "safety_tick_margin",
     )
 
     def __post_init__(self) -> None:
@@ -246,6 +292,14 @@ class ExcitationConfig(_Params):
         if self.information_measure not in ("logdet", "min_eig"):
             raise ParameterError(
                 f"ExcitationConfig.information_measure must be 'logdet' or 'min_eig', got {self.information_measure!r}"
+            )
+        if not self.safety_stiffness_uncertainty < 1.0:
+            raise ParameterError(
+                f"ExcitationConfig.safety_stiffness_uncertainty must be in [0, 1), got {self.safety_stiffness_uncertainty!r}"
+            )
+        if not self.safety_tick_margin < self.ay_limit:
+            raise ParameterError(
+                f"ExcitationConfig.safety_tick_margin ({self.safety_tick_margin}) must be below ay_limit ({self.ay_limit})"
             )
         if not 0.0 <= self.soft_fraction < 1.0:
             raise ParameterError(f"ExcitationConfig.soft_fraction must be in [0, 1), got {self.soft_fraction!r}")
@@ -333,7 +387,8 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     ## Action Space
 
     ``Box(-1, 1, (1,), float32)``: steering offset ``action * max_steering_offset`` [rad]
-    added to the built-in driver (values outside are clipped; NaN raises ``ValueError``).
+    added to the built-in driver (values outside are clipped; NaN raises ``ValueError``),
+    after the safety filter when ``config.safety_filter`` is on.
 
     ## Observation Space
 
@@ -355,7 +410,8 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     ``info["excitation"]``: ``information``, ``information_initial``, ``reward_information``,
     ``penalty_ay``, ``penalty_lane``, ``penalty_steering_rate``, ``penalty_departure``,
-    ``max_abs_ay``, ``steering_rate``, ``e1_hat`` and (scoring only) ``true_max_abs_e1``;
+    ``max_abs_ay``, ``steering_rate``, ``e1_hat``, ``offset`` (applied) and ``offset_requested``
+    [rad], ``filter_active``, ``filter_predicted_peak`` [m/s^2] and (scoring only) ``true_max_abs_e1``;
     ``info["truth_draw"]`` at reset when the truth is randomised. The base env's per-tick
     ``sensor_log``/``truth_log`` are passed on only with ``info_logs=True``: they are large
     (50 rows per step), and gymnasium's determinism check compares infos with
@@ -417,6 +473,26 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.observation_space = spaces.Box(-_OBS_BOUND, _OBS_BOUND, shape=(n_obs,), dtype=np.float32)
         self._truth_rng: np.random.Generator | None = None
         self.truth_draw: dict[str, float] | None = None
+        self.safety_filter: LateralAccelerationFilter | None = None
+        if self.config.safety_filter:
+            self._driver = getattr(getattr(base, "sim", base), "driver", None)
+            camera = getattr(base, "estimator_inputs", {}).get("camera")
+            if self._driver is None or camera is None:
+                raise TypeError(
+                    f"{type(base).__name__} exposes no lane-keeping driver or camera; the safety filter needs both"
+                )
+            cfg = self.config
+            self.safety_filter = LateralAccelerationFilter(
+                self.vehicle, self._driver.params, cfg.ay_limit, self.dt_policy, camera,
+                stiffness_uncertainty=cfg.safety_stiffness_uncertainty, horizon=cfg.safety_horizon,
+                noise_sigmas=cfg.safety_noise_sigmas, lane_margin=cfg.lane_margin if cfg.safety_lane else None,
+            )  # fmt: skip
+            # and every physics tick: the IMU a_y guard on the total steering (catches what the
+            # step-level prediction cannot see: the driver's reaction to each noisy camera frame)
+            gain = 2.0 * self.vehicle.Cf / self.vehicle.m
+            s_unc = cfg.safety_stiffness_uncertainty
+            self._driver.set_ay_guard(cfg.ay_limit - cfg.safety_tick_margin, (1.0 - s_unc) * gain, (1.0 + s_unc) * gain)
+        self._est_state = np.zeros(4)
         self._reset_records()
 
     # -- information -------------------------------------------------------------------------
@@ -467,7 +543,11 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._prev_action = 0.0
         self._prev_delta_mean: float | None = None
         self._t = 0.0
-        self._last = {"e1_cam": 0.0, "e2_cam": 0.0, "ay": 0.0, "ay_max": 0.0, "delta": 0.0, "kappa": 0.0, "vx": self.vehicle.vx}
+        # the base envs observe [e1, e2, frame age, vx, kappa, delta]: start speed and curvature
+        # (the highway ego starts slower than the nominal speed)
+        self._last = {"e1_cam": 0.0, "e2_cam": 0.0, "ay": 0.0, "ay_max": 0.0, "delta": 0.0,
+                      "kappa": float(obs[4]), "vx": float(obs[3])}  # fmt: skip
+        self._est_state = np.asarray(info["estimate"]["state"], dtype=float).copy()
         self._reset_records()
         if self.truth_draw is not None:
             info["truth_draw"] = dict(self.truth_draw)
@@ -481,7 +561,15 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if not np.isfinite(a[0]):
             raise ValueError(f"action must be finite, got {a[0]!r} (NaN or infinite steering offset)")
         u = float(np.clip(a[0], -1.0, 1.0))
-        offset = u * self.config.max_steering_offset
+        requested = offset = u * self.config.max_steering_offset
+        decision = None
+        if self.safety_filter is not None:
+            decision = self.safety_filter.decide(
+                requested, self._est_state, self._driver.integral, self._last["vx"], self._last["kappa"],
+                max_offset=self.config.max_steering_offset,
+            )  # fmt: skip
+            offset = decision.applied
+            u = offset / self.config.max_steering_offset
         _, _, terminated, truncated, info = self.env.step(np.array([offset], dtype=np.float32))
         cfg = self.config
         log = info["sensor_log"]
@@ -499,6 +587,7 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._last.update(ay=float(ay[-1]), ay_max=ay_max, delta=float(log["delta"][-1]),
                           kappa=float(log["kappa"][-1]), vx=float(log["vx"][-1]))  # fmt: skip
         e1_hat = float(est["state"][0])
+        self._est_state = np.asarray(est["state"], dtype=float).copy()
 
         # reward: information gained (or, simulation only, true error decrease) minus penalties
         j = self.information()
@@ -533,6 +622,9 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             "steering_rate": rate,
             "e1_hat": e1_hat,
             "offset": offset,
+            "offset_requested": requested,
+            "filter_active": bool(decision is not None and decision.active),
+            "filter_predicted_peak": math.nan if decision is None else decision.predicted_peak,
             "true_max_abs_e1": true_e1,
         }
         if self.record:
@@ -577,7 +669,7 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     # -- episode records and scoring -----------------------------------------------------------
     def _reset_records(self) -> None:
         self._rec: dict[str, list] = {k: [] for k in ("t", "weights", "max_abs_ay", "steering_rate", "true_max_abs_e1",
-                                                      "true_slip", "slip_hat", "reward", "information")}  # fmt: skip
+                                                      "true_slip", "slip_hat", "reward", "information", "filter_active")}  # fmt: skip
         self._departed = False
 
     def _records(self, info, ay_max, rate, true_e1, reward) -> None:
@@ -589,6 +681,7 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         r["true_max_abs_e1"].append(np.nan if true_e1 is None else true_e1)
         r["reward"].append(reward)
         r["information"].append(self._j)
+        r["filter_active"].append(info["excitation"]["filter_active"])
         if "truth_log" in info:
             r["true_slip"].append(info["truth_log"]["true_slip"])
         r["slip_hat"].append(info["estimate"]["slip"].copy())
@@ -608,7 +701,8 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             range inside the excited range), ``convergence_time_s`` (time after which the
             worse-axle NRMSE stays below ``threshold``; ``None`` if never), ``lane_violation_steps``
             (steps whose true ``|e1|`` exceeded ``lane_margin``), ``departed``, ``max_abs_e1``,
-            ``max_abs_ay``, ``ay_violation_steps``, ``max_steering_rate`` [rad/s],
+            ``max_abs_ay``, ``ay_violation_steps``, ``filter_active_steps`` (steps whose offset the
+            safety filter changed), ``max_steering_rate`` [rad/s],
             ``information_gain``, ``return``, ``duration_s``.
         """
         r = self._rec
@@ -664,6 +758,7 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             max_abs_e1=float(np.nanmax(e1)),
             max_abs_ay=float(np.max(ay)),
             ay_violation_steps=int(np.sum(ay > self.config.ay_limit)),
+            filter_active_steps=int(np.sum(r["filter_active"])),
             max_steering_rate=float(np.max(r["steering_rate"])),
             information_gain=float(r["information"][-1] - self._j0),
             error_history={"t": t.tolist(), "nrmse_max": errors.tolist()},
