@@ -66,12 +66,17 @@ def load_baselines(path: Path) -> list[Any]:
 
 
 def evaluate_policy(
-    name: str, act: Callable, road, seeds: list[int], duration: float, kind: str, safety_filter: bool = True
+    name: str, act: Callable, road, seeds: list[int], duration: float, kind: str, safety_filter: bool = True,
+    env_name: str = "straight",
 ) -> dict[str, Any]:
     from tire_learning_env.scripted import run_policy
-    from tire_learning_env.wrappers.excitation import ExcitationConfig, make_excitation_env
+    from tire_learning_env.wrappers.excitation import ExcitationConfig, make_excitation_env, make_highway_excitation_env
 
-    env = make_excitation_env(config=ExcitationConfig(safety_filter=safety_filter), road=road)
+    config = ExcitationConfig(safety_filter=safety_filter)
+    if env_name == "highway":  # the highway-env traffic scene brings its own road
+        env = make_highway_excitation_env(config=config)
+    else:
+        env = make_excitation_env(config=config, road=road)
     t0 = time.perf_counter()
     episodes = []
     for s in seeds:
@@ -121,7 +126,7 @@ def aggregate(episodes: list[dict[str, Any]]) -> dict[str, Any]:
 def target_check(results: list[dict[str, Any]], ay_limit: float) -> dict[str, Any]:
     """Each learned policy against the best scripted baseline (lowest mean worse-axle NRMSE)."""
     scripted = [r for r in results if r["kind"] == "scripted"]
-    learned = [r for r in results if r["kind"] == "learned"]
+    learned = [r for r in results if r["kind"] == "learned" and r.get("safety_filter", True)]
     if not scripted:
         return {}
     best = min(scripted, key=lambda r: r["aggregate"]["tire_curve_nrmse_max"]["mean"])
@@ -152,7 +157,7 @@ def markdown(results: list[dict[str, Any]], check: dict[str, Any], meta: dict[st
         return f"{fmt.format(scale * s['mean'])} ± {fmt.format(scale * s['std'])}"
 
     lines = [
-        f"Excitation policies on `TireLearning-Excitation-v0`: {meta['duration_s']:.0f} s of driving per episode, "
+        f"Excitation policies on `{meta['env_id']}`: {meta['duration_s']:.0f} s of driving per episode, "
         f"seeds {meta['seeds'][0]}-{meta['seeds'][-1]} ({len(meta['seeds'])} held-out seeds: new truth tires and camera "
         f"noise), a_y limit {meta['ay_limit']:.1f} m/s², lane margin {meta['lane_margin']:.2f} m. Tire-curve NRMSE over "
         f"the fixed target range |α_f| ≤ {meta['target_slip_deg']['front']:.2f}°, |α_r| ≤ "
@@ -297,18 +302,31 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-figures", action="store_true")
     parser.add_argument("--baseline-filter", choices=("both", "on", "off"), default="both",
                         help="drive the scripted manoeuvres with the safety filter, without it, or both (default)")
+    parser.add_argument("--policy-filter", choices=("both", "on", "off"), default="on",
+                        help="drive the trained policies with the safety filter (default), without it, or both")
+    parser.add_argument("--env", choices=("straight", "highway"), default="straight",
+                        help="TireLearning-Excitation-v0 (default) or TireLearning-HighwayExcitation-v0 "
+                             "(highway-env traffic; trained policies only)")
     args = parser.parse_args(argv)
 
     from tire_learning_env.roads import StraightRoad
     from tire_learning_env.wrappers.excitation import ExcitationConfig, make_excitation_env
 
+    if args.env == "highway" and not args.no_baselines:
+        print("--env highway: the scripted manoeuvres need their own roads, evaluating the trained policies only")
+        args.no_baselines = True
     results = []
+    policy_filters = {"both": (True, False), "on": (True,), "off": (False,)}[args.policy_filter]
     for path in args.policies:
         model = load_model(path)
         name = _policy_name(path)
-        results.append(evaluate_policy(name, model_policy(model), StraightRoad(), args.seeds, args.duration, "learned"))
-        results[-1]["path"] = str(path)
-        print(f"{name:16s} worse-axle NRMSE {100 * results[-1]['aggregate']['tire_curve_nrmse_max']['mean']:.2f} %", flush=True)
+        for filtered in policy_filters:
+            results.append(evaluate_policy(name, model_policy(model), StraightRoad(), args.seeds, args.duration, "learned",
+                                           filtered, args.env))  # fmt: skip
+            results[-1]["path"] = str(path)
+            label = name + ("" if filtered else " (no filter)")
+            print(f"{label:28s} worse-axle NRMSE {100 * results[-1]['aggregate']['tire_curve_nrmse_max']['mean']:.2f} %",
+                  flush=True)  # fmt: skip
     if not args.no_baselines:
         dt = 1.0 / 20.0
         max_offset = ExcitationConfig().max_steering_offset
@@ -327,7 +345,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("nothing to evaluate: give --policies and/or baselines")
     env = make_excitation_env()
     meta = {
-        "env_id": "TireLearning-Excitation-v0",
+        "env_id": "TireLearning-HighwayExcitation-v0" if args.env == "highway" else "TireLearning-Excitation-v0",
         "seeds": list(args.seeds),
         "duration_s": args.duration,
         "ay_limit": env.config.ay_limit,

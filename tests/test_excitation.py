@@ -310,3 +310,19 @@ def test_evaluation_script_writes_the_table(tmp_path):
     table = (tmp_path / "excitation_table.md").read_text()
     assert table.count("\n| ") >= len(names) + 1 and "Best scripted baseline" in table
     assert (tmp_path / "figures" / "excitation_curves.png").stat().st_size > 10_000
+    # scripted manoeuvres are driven with and without the safety filter by default
+    kinds = {(r["name"], r["safety_filter"]) for r in data["summary"] if r["kind"] == "scripted"}
+    assert ("lane_changes", True) in kinds and ("lane_changes", False) in kinds
+
+
+def test_evaluation_on_the_highway_variant_with_and_without_the_filter(tmp_path):
+    evaluate = _load_script("evaluate")
+    policy = str(AGENTS / "policies" / "ppo_excitation.zip")
+    args = ["--env", "highway", "--policies", policy, "--policy-filter", "both", "--seeds", "4000", "--duration", "3",
+            "--no-figures", "--out", str(tmp_path)]  # fmt: skip
+    assert evaluate.main(args) == 0
+    data = json.loads((tmp_path / "excitation_table.json").read_text())
+    assert data["meta"]["env_id"] == "TireLearning-HighwayExcitation-v0"
+    rows = {(r["name"], r["kind"], r["safety_filter"]) for r in data["summary"]}
+    assert rows == {("ppo", "learned", True), ("ppo", "learned", False)}  # no scripted rows: they need their roads
+    assert "TireLearning-HighwayExcitation-v0" in (tmp_path / "excitation_table.md").read_text()
