@@ -46,6 +46,13 @@ from _common import AGENTS_DIR, EVALUATION_SEEDS, REPO_DIR, load_model, model_po
 
 DEFAULT_POLICIES = sorted((AGENTS_DIR / "policies").glob("*.zip"))
 DEFAULT_BASELINES = AGENTS_DIR / "configs" / "scripted_baselines.json"
+#: ``--policy-filter`` / ``--baseline-filter`` choices -> the safety-filter settings to drive with.
+FILTER_CHOICES = {"both": (True, False), "on": (True,), "off": (False,)}
+
+
+def row_label(name: str, safety_filter: bool) -> str:
+    """A table row's name: ``name``, marked when the row drove without the safety filter."""
+    return name if safety_filter else f"{name} (no filter)"
 
 
 def _policy_name(path: Path) -> str:
@@ -130,7 +137,7 @@ def target_check(results: list[dict[str, Any]], ay_limit: float) -> dict[str, An
     if not scripted:
         return {}
     best = min(scripted, key=lambda r: r["aggregate"]["tire_curve_nrmse_max"]["mean"])
-    best_name = best["name"] + ("" if best.get("safety_filter", True) else " (no filter)")
+    best_name = row_label(best["name"], best.get("safety_filter", True))
     out = {"best_scripted": best_name, "policies": {}}
     for r in learned:
         a, b = r["aggregate"], best["aggregate"]
@@ -177,8 +184,8 @@ def markdown(results: list[dict[str, Any]], check: dict[str, Any], meta: dict[st
         ef, er = a["excited_slip_range_deg"]["front"], a["excited_slip_range_deg"]["rear"]
         conv = a["convergence_time_s"]["median"]
         conv_s = "—" if conv is None or not math.isfinite(conv) else f"{conv:.1f}"
-        label = f"**{r['name']}** (learned)" if r["kind"] == "learned" else r["name"]
-        label += "" if r.get("safety_filter", True) else " (no filter)"
+        name = f"**{r['name']}** (learned)" if r["kind"] == "learned" else r["name"]
+        label = row_label(name, r.get("safety_filter", True))
         active = f"{100 * a['filter_active_fraction']:.1f}" if r.get("safety_filter", True) else "—"
         lines.append(
             f"| {label} | {ms(a['tire_curve_nrmse']['front'])} | {ms(a['tire_curve_nrmse']['rear'])} "
@@ -300,9 +307,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=60.0, help="driving time per episode [s]")
     parser.add_argument("--out", type=Path, default=REPO_DIR / "docs", help="output directory")
     parser.add_argument("--no-figures", action="store_true")
-    parser.add_argument("--baseline-filter", choices=("both", "on", "off"), default="both",
+    parser.add_argument("--baseline-filter", choices=tuple(FILTER_CHOICES), default="both",
                         help="drive the scripted manoeuvres with the safety filter, without it, or both (default)")
-    parser.add_argument("--policy-filter", choices=("both", "on", "off"), default="on",
+    parser.add_argument("--policy-filter", choices=tuple(FILTER_CHOICES), default="on",
                         help="drive the trained policies with the safety filter (default), without it, or both")
     parser.add_argument("--env", choices=("straight", "highway"), default="straight",
                         help="TireLearning-Excitation-v0 (default) or TireLearning-HighwayExcitation-v0 "
@@ -316,7 +323,7 @@ def main(argv: list[str] | None = None) -> int:
         print("--env highway: the scripted manoeuvres need their own roads, evaluating the trained policies only")
         args.no_baselines = True
     results = []
-    policy_filters = {"both": (True, False), "on": (True,), "off": (False,)}[args.policy_filter]
+    policy_filters = FILTER_CHOICES[args.policy_filter]
     for path in args.policies:
         model = load_model(path)
         name = _policy_name(path)
@@ -324,22 +331,19 @@ def main(argv: list[str] | None = None) -> int:
             results.append(evaluate_policy(name, model_policy(model), StraightRoad(), args.seeds, args.duration, "learned",
                                            filtered, args.env))  # fmt: skip
             results[-1]["path"] = str(path)
-            label = name + ("" if filtered else " (no filter)")
-            print(f"{label:28s} worse-axle NRMSE {100 * results[-1]['aggregate']['tire_curve_nrmse_max']['mean']:.2f} %",
+            print(f"{row_label(name, filtered):28s} worse-axle NRMSE {100 * results[-1]['aggregate']['tire_curve_nrmse_max']['mean']:.2f} %",
                   flush=True)  # fmt: skip
     if not args.no_baselines:
         dt = 1.0 / 20.0
         max_offset = ExcitationConfig().max_steering_offset
-        filters = {"both": (True, False), "on": (True,), "off": (False,)}[args.baseline_filter]
-        for filtered in filters:
+        for filtered in FILTER_CHOICES[args.baseline_filter]:
             for m in load_baselines(args.baselines):
                 def act(obs, k, m=m):
                     return m.offset(k * dt) / max_offset
 
                 results.append(evaluate_policy(m.name, act, m.road(), args.seeds, args.duration, "scripted", filtered))
                 results[-1]["manoeuvre"] = m.describe()
-                label = m.name + ("" if filtered else " (no filter)")
-                print(f"{label:28s} worse-axle NRMSE {100 * results[-1]['aggregate']['tire_curve_nrmse_max']['mean']:.2f} %",
+                print(f"{row_label(m.name, filtered):28s} worse-axle NRMSE {100 * results[-1]['aggregate']['tire_curve_nrmse_max']['mean']:.2f} %",
                       flush=True)  # fmt: skip
     if not results:
         parser.error("nothing to evaluate: give --policies and/or baselines")

@@ -125,6 +125,11 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         info["estimate"] = self._last
         return self._observation(obs), reward, terminated, truncated, info
 
+    @property
+    def last_estimate(self) -> dict[str, Any] | None:
+        """The estimate after the last ``reset``/``step`` (``info["estimate"]``); ``None`` before the first reset."""
+        return self._last
+
     # -- helpers --------------------------------------------------------------------------
     def _estimate_now(self) -> dict[str, Any]:
         return self.observer.estimate_now(0.0, 0.0)

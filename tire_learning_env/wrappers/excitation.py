@@ -492,7 +492,6 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             gain = 2.0 * self.vehicle.Cf / self.vehicle.m
             s_unc = cfg.safety_stiffness_uncertainty
             self._driver.set_ay_guard(cfg.ay_limit - cfg.safety_tick_margin, (1.0 - s_unc) * gain, (1.0 + s_unc) * gain)
-        self._est_state = np.zeros(4)
         self._reset_records()
 
     # -- information -------------------------------------------------------------------------
@@ -547,7 +546,6 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         # (the highway ego starts slower than the nominal speed)
         self._last = {"e1_cam": 0.0, "e2_cam": 0.0, "ay": 0.0, "ay_max": 0.0, "delta": 0.0,
                       "kappa": float(obs[4]), "vx": float(obs[3])}  # fmt: skip
-        self._est_state = np.asarray(info["estimate"]["state"], dtype=float).copy()
         self._reset_records()
         if self.truth_draw is not None:
             info["truth_draw"] = dict(self.truth_draw)
@@ -565,7 +563,8 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         decision = None
         if self.safety_filter is not None:
             decision = self.safety_filter.decide(
-                requested, self._est_state, self._driver.integral, self._last["vx"], self._last["kappa"],
+                requested, self.estimator.last_estimate["state"], self._driver.integral, self._last["vx"],
+                self._last["kappa"],
                 max_offset=self.config.max_steering_offset,
             )  # fmt: skip
             offset = decision.applied
@@ -587,7 +586,6 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._last.update(ay=float(ay[-1]), ay_max=ay_max, delta=float(log["delta"][-1]),
                           kappa=float(log["kappa"][-1]), vx=float(log["vx"][-1]))  # fmt: skip
         e1_hat = float(est["state"][0])
-        self._est_state = np.asarray(est["state"], dtype=float).copy()
 
         # reward: information gained (or, simulation only, true error decrease) minus penalties
         j = self.information()

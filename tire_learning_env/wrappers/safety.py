@@ -295,10 +295,17 @@ class LateralAccelerationFilter:
         rows = slice(0, self.n_horizon) if output == "ay" else slice(self.n_horizon, 2 * self.n_horizon)
         return f[:, None, rows] + G[:, :, rows] * float(offset)
 
+    @staticmethod
+    def _start(state: ArrayLike, integral: float) -> NDArray:
+        """The closed loop's start ``[e1, e1_dot, e2, e2_dot, z]``."""
+        s0 = np.empty(5)
+        s0[:4] = np.asarray(state, dtype=float).reshape(4)
+        s0[4] = float(integral)
+        return s0
+
     def _affine(self, state, integral, vx, kappa):
         M, q, G = self._response(vx)
-        s0 = np.append(np.asarray(state, dtype=float).reshape(4), float(integral))
-        f = M @ s0 + q * float(kappa)  # (vertices, horizon)
+        f = M @ self._start(state, integral) + q * float(kappa)  # (vertices, horizon)
         return f, G
 
     # -- decision --------------------------------------------------------------------------
@@ -335,9 +342,7 @@ class LateralAccelerationFilter:
                 f"ay_limit={self.ay_limit} m/s^2: lower noise_sigmas or raise the limit"
             )
         M, q, G = self._response(vx)
-        s0 = np.empty(5)
-        s0[:4] = np.asarray(state, dtype=float).reshape(4)
-        s0[4] = float(integral)
+        s0 = self._start(state, integral)
         lane_limit = math.inf if self.lane_margin is None else self.lane_margin - self.lane_safety_margin()
         applied, peak, max_e1, beyond = _decide_kernel(M, q, G, s0, float(kappa), n, bound_ay, lane_limit,
                                                        requested, bound)  # fmt: skip
