@@ -17,6 +17,10 @@ Keys (the same for every study):
 - ``convergence_time_s``: time after which the online tire-curve error stays below 5 %.
 - ``tire_curve_nrmse_nominal``: the same score for the nominal linear curve (what you
   get without learning), as a reference.
+
+Diagnostics (not in ``metrics.json``; ``benchmarks/bench_study2_error_budget.py``):
+:func:`bicycle_implied_axle_forces` and :func:`oracle_cornering_stiffness` give the
+stiffness a bicycle-model estimator with *perfect* states would report on a plant.
 """
 
 from __future__ import annotations
@@ -27,7 +31,10 @@ from typing import Callable, Mapping
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["compute_metrics", "excited_range", "curve_nrmse", "convergence_time", "AXLES"]
+__all__ = [
+    "compute_metrics", "excited_range", "curve_nrmse", "convergence_time", "bicycle_implied_axle_forces",
+    "oracle_cornering_stiffness", "AXLES",
+]  # fmt: skip
 
 AXLES = ("front", "rear")
 CurveFn = Callable[[NDArray, str], NDArray]
@@ -58,6 +65,77 @@ def convergence_time(
         return float(t[0])
     last = above[-1]
     return float(t[last + 1]) if last + 1 < len(t) else None
+
+
+def bicycle_implied_axle_forces(
+    t: NDArray, state: NDArray, vx: NDArray, psi_dot_des: NDArray, psi_ddot_des: NDArray, vehicle
+) -> NDArray:
+    """Axle forces ``[F_yf, F_yr]`` [N] the bicycle model needs to move along ``state`` exactly.
+
+    Inverts Newton's equations in error coordinates (SPEC §1, check under eqs. 1-8),
+
+        e1_ddot = (F_yf + F_yr) / m - vx psi_dot_des
+        e2_ddot = (lf F_yf - lr F_yr) / Iz - psi_ddot_des
+
+    with ``e1_ddot``, ``e2_ddot`` the time derivatives of ``e1_dot``, ``e2_dot``
+    (second-order central differences). On a plant that *is* this bicycle model the
+    result equals its axle forces; on a higher-order plant it is the force a bicycle
+    model must attribute to the tires to reproduce the motion (roll inertia, load
+    transfer and suspension effects included).
+
+    Parameters
+    ----------
+    t : (n,) time [s]
+    state : (n, 4) ``[e1, e1_dot, e2, e2_dot]``
+    vx, psi_dot_des, psi_ddot_des : (n,) speed [m/s], desired yaw rate [rad/s] and its rate [rad/s^2]
+    vehicle : VehicleParams
+        ``m``, ``Iz``, ``lf``, ``lr`` of the bicycle model.
+    """
+    t = np.asarray(t, dtype=float)
+    state = np.asarray(state, dtype=float)
+    e1_ddot = np.gradient(state[:, 1], t)
+    e2_ddot = np.gradient(state[:, 3], t)
+    lateral = vehicle.m * (e1_ddot + np.asarray(vx, dtype=float) * np.asarray(psi_dot_des, dtype=float))
+    yaw = vehicle.Iz * (e2_ddot + np.asarray(psi_ddot_des, dtype=float))
+    wheelbase = vehicle.lf + vehicle.lr
+    return np.column_stack([(yaw + vehicle.lr * lateral) / wheelbase, (vehicle.lf * lateral - yaw) / wheelbase])
+
+
+def oracle_cornering_stiffness(
+    slip: NDArray, force: NDArray, basis, nominal_stiffness: tuple[float, float]
+) -> tuple[float, float]:
+    """Per-tire cornering stiffness of a least-squares fit of ``force`` against ``slip`` [N/rad].
+
+    The fit uses the estimator's own curve representation (SPEC eq. 14: the nominal
+    linear force plus ``basis``), unregularised and unbounded, and reports half the
+    slope of the fitted axle curve at zero slip, as
+    :meth:`~.observer.NeuroAdaptiveObserver.cornering_stiffness` does. Fed the true slip
+    and :func:`bicycle_implied_axle_forces` of the true state, it is what a bicycle-model
+    estimator with perfect states would report: the part of a stiffness error that
+    comes from the plant's structure, not from estimation.
+
+    Parameters
+    ----------
+    slip, force : (n, 2) slip angles [rad] and axle forces [N], front and rear
+    basis : SoftClipBasis
+    nominal_stiffness : per-tire (front, rear) [N/rad] of the linear part
+    """
+    from .observer.warm_start import regressors
+
+    slip = np.asarray(slip, dtype=float)
+    force = np.asarray(force, dtype=float)
+    out = []
+    N = basis.n_per_axle
+    for axle in (0, 1):
+        a = slip[:, axle]
+        X = regressors(basis, a, axle)
+        y = force[:, axle] - 2.0 * nominal_stiffness[axle] * a
+        w = np.linalg.lstsq(X, y, rcond=None)[0]
+        weights = np.zeros((2, N))
+        weights[axle] = w
+        slope = 2.0 * nominal_stiffness[axle] + float(basis.nonlinear_slope(0.0, weights.ravel(), axle))
+        out.append(slope / 2.0)
+    return out[0], out[1]
 
 
 def _rmse(a: NDArray, b: NDArray) -> float:
