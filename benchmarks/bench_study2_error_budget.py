@@ -56,9 +56,13 @@ def _errors(stiffness, reference) -> list[float]:
     return [round(100.0 * (float(stiffness[i]) / float(reference[i]) - 1.0), 3) for i in range(2)]
 
 
-def _observer(spec, plant, reference) -> dict:
-    """Simulate and estimate as ``run_study`` does; stiffness error and the ``e1_dot`` gain."""
-    log = simulate(spec.road, spec.duration, vehicle=spec.true_vehicle, camera=spec.camera, seed=spec.seed, plant=plant)
+def _log(spec, plant):
+    """Simulate ``spec`` on ``plant`` as ``run_study`` does."""
+    return simulate(spec.road, spec.duration, vehicle=spec.true_vehicle, camera=spec.camera, seed=spec.seed, plant=plant)
+
+
+def _observer(spec, log, reference) -> dict:
+    """Estimate as ``run_study`` does; stiffness error and the ``e1_dot`` gain."""
     result = estimate(log.sensors, spec.nominal_vehicle, spec.camera, spec.config, physics_dt=log.dt)
     keep = result.trace.t >= result.trace.t[0] + 2.0
     true_rate = np.asarray(log.truth["true_state"])[keep, 1]
@@ -66,8 +70,7 @@ def _observer(spec, plant, reference) -> dict:
     return {"error_pct": _errors(result.cornering_stiffness(), reference), "e1_dot_gain": round(gain, 4)}
 
 
-def _oracle(spec, plant, reference) -> dict:
-    log = simulate(spec.road, spec.duration, vehicle=spec.true_vehicle, camera=spec.camera, seed=spec.seed, plant=plant)
+def _oracle(spec, log, reference) -> dict:
     s, truth = log.sensors, log.truth
     t = np.asarray(s["t"], dtype=float)
     keep = t >= t[0] + 2.0
@@ -103,20 +106,21 @@ def main() -> None:
         return replace(spec, nominal_vehicle=spec.nominal_vehicle.replace(**changes))
 
     nominal = spec.nominal_vehicle
+    study2, low_order = _log(spec, high()), _log(low_spec, low())  # each used by the observer and the oracle
     result = {
         "target_pct": 0.5,
         "reference": {"high_order": "effective axle stiffness", "low_order": "tire stiffness"},
         "effective_stiffness": [round(float(c), 1) for c in effective],
-        "observer": _observer(spec, high(), effective),
-        "observer_no_relaxation": _observer(spec, high(HighOrderConfig(relaxation_length=0.0)), effective),
-        "observer_low_order": _observer(low_spec, low(), (truth.Cf, truth.Cr)),
-        "observer_yaw_inertia_x1.05": _observer(with_nominal(Iz=1.05 * nominal.Iz), high(), effective),
+        "observer": _observer(spec, study2, effective),
+        "observer_no_relaxation": _observer(spec, _log(spec, high(HighOrderConfig(relaxation_length=0.0))), effective),
+        "observer_low_order": _observer(low_spec, low_order, (truth.Cf, truth.Cr)),
+        "observer_yaw_inertia_x1.05": _observer(with_nominal(Iz=1.05 * nominal.Iz), study2, effective),
         "observer_start_from_effective_x": {
-            f"{k:g}": _observer(with_nominal(Cf=k * effective[0], Cr=k * effective[1]), high(), effective)["error_pct"]
+            f"{k:g}": _observer(with_nominal(Cf=k * effective[0], Cr=k * effective[1]), study2, effective)["error_pct"]
             for k in START_SCALES
         },
-        "oracle": _oracle(spec, high(), effective),
-        "oracle_low_order": _oracle(low_spec, low(), (truth.Cf, truth.Cr)),
+        "oracle": _oracle(spec, study2, effective),
+        "oracle_low_order": _oracle(low_spec, low_order, (truth.Cf, truth.Cr)),
     }
     result["wall_s"] = round(time.perf_counter() - t0, 1)
     emit(result)
