@@ -13,6 +13,8 @@ measured error into what the plant's structure allows and what the estimator add
 - ``observer_yaw_inertia_x1.05``: Study 2 with the nominal yaw inertia 5 % high.
 - ``observer_start_from_effective_x``: Study 2 started from the effective stiffness times
   0.9, 1.0, 1.05 instead of the paper's ratios.
+- ``curve_error_n_at_deg`` (low-order run): learned minus true axle force [N] at
+  0.1, 0.2, 0.4 deg of slip.
 - ``e1_dot_gain``: slope of the estimated ``e1_dot`` regressed on the true one (1 = unbiased).
 - ``oracle``: a bicycle-model estimator with *perfect* states. The axle forces the
   bicycle model needs to reproduce the true state trajectory
@@ -50,6 +52,7 @@ from tire_learning_env.tires import axle_tires  # noqa: E402
 PAPER_RATIOS = (102466.1678 / 90211.1436, 102466.1678 / 87945.9970)
 LOWPASS_HZ = (2.0, 1.0)
 START_SCALES = (0.9, 1.0, 1.05)
+MISFIT_SLIP_DEG = (0.1, 0.2, 0.4)
 
 
 def _errors(stiffness, reference) -> list[float]:
@@ -61,13 +64,22 @@ def _log(spec, plant):
     return simulate(spec.road, spec.duration, vehicle=spec.true_vehicle, camera=spec.camera, seed=spec.seed, plant=plant)
 
 
-def _observer(spec, log, reference) -> dict:
-    """Estimate as ``run_study`` does; stiffness error and the ``e1_dot`` gain."""
+def _observer(spec, log, reference, true_curve=None) -> dict:
+    """Estimate as ``run_study`` does; stiffness error, the ``e1_dot`` gain and, given
+    ``true_curve(alpha, axle)``, the learned minus the true axle force at small slips."""
     result = estimate(log.sensors, spec.nominal_vehicle, spec.camera, spec.config, physics_dt=log.dt)
     keep = result.trace.t >= result.trace.t[0] + 2.0
     true_rate = np.asarray(log.truth["true_state"])[keep, 1]
     gain = float(np.polyfit(true_rate, result.trace.xi[keep, 1], 1)[0])  # estimated e1_dot per true e1_dot
-    return {"error_pct": _errors(result.cornering_stiffness(), reference), "e1_dot_gain": round(gain, 4)}
+    out = {"error_pct": _errors(result.cornering_stiffness(), reference), "e1_dot_gain": round(gain, 4)}
+    if true_curve is not None:
+        slips = np.radians(np.array(MISFIT_SLIP_DEG))
+        out["curve_error_n_at_deg"] = {
+            f"{d:g}": [round(float(result.axle_force(np.array([a]), axle)[0] - true_curve(np.array([a]), axle)[0]), 2)
+                       for axle in ("front", "rear")]
+            for d, a in zip(MISFIT_SLIP_DEG, slips)
+        }  # fmt: skip
+    return out
 
 
 def _oracle(spec, log, reference) -> dict:
@@ -106,14 +118,15 @@ def main() -> None:
         return replace(spec, nominal_vehicle=spec.nominal_vehicle.replace(**changes))
 
     nominal = spec.nominal_vehicle
-    study2, low_order = _log(spec, high()), _log(low_spec, low())  # each used by the observer and the oracle
+    low_plant = low()
+    study2, low_order = _log(spec, high()), _log(low_spec, low_plant)  # each used by the observer and the oracle
     result = {
         "target_pct": 0.5,
         "reference": {"high_order": "effective axle stiffness", "low_order": "tire stiffness"},
         "effective_stiffness": [round(float(c), 1) for c in effective],
         "observer": _observer(spec, study2, effective),
         "observer_no_relaxation": _observer(spec, _log(spec, high(HighOrderConfig(relaxation_length=0.0))), effective),
-        "observer_low_order": _observer(low_spec, low_order, (truth.Cf, truth.Cr)),
+        "observer_low_order": _observer(low_spec, low_order, (truth.Cf, truth.Cr), low_plant.true_axle_curve),
         "observer_yaw_inertia_x1.05": _observer(with_nominal(Iz=1.05 * nominal.Iz), study2, effective),
         "observer_start_from_effective_x": {
             f"{k:g}": _observer(with_nominal(Cf=k * effective[0], Cr=k * effective[1]), study2, effective)["error_pct"]
