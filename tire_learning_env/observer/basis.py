@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..params import ParameterError, VehicleParams
 
-__all__ = ["SoftClipBasis", "paper_basis", "two_sided_basis", "make_basis", "BASIS_PRESETS"]
+__all__ = ["SoftClipBasis", "paper_basis", "two_sided_basis", "imu_basis", "make_basis", "BASIS_PRESETS"]
 
 
 def _softplus(x: NDArray) -> NDArray:
@@ -193,6 +193,37 @@ class SoftClipBasis:
                     corr[i, j] = c if np.sign(mid[i]) == np.sign(mid[j]) else symmetry * c
         return np.kron(np.eye(2), corr)
 
+    def slope_prior(self, length: float, symmetry: float = 0.0) -> NDArray:
+        """Prior correlation (2N, 2N) of the weights as samples of a smooth slope function.
+
+        The weights of slip segments are deviations of the curve's slope on their segment;
+        a Gaussian process with squared-exponential kernel over slip, of length scale
+        ``length`` [rad], correlates segments by their slip distance (narrow segments near
+        zero move together, so the slope there is informed by the whole neighbourhood), and
+        ``symmetry`` in [0, 1) adds the mirror term ``exp(-(a_i + a_j)^2 / 2 length^2)``
+        (a tire curve is nearly odd: left and right turns share their slope). Constant
+        (bias) members are independent. Block-diagonal per axle; unit diagonal.
+        """
+        N = self.n_per_axle
+        out = np.zeros((2 * N, 2 * N))
+        for i in (0, 1):
+            lo, hi = self.lower[i], self.upper[i]
+            const = lo == hi
+            mid = 0.5 * (lo + hi)
+            if length > 0:
+                d = mid[:, None] - mid[None, :]
+                m = mid[:, None] + mid[None, :]
+                K = (np.exp(-0.5 * (d / length) ** 2) + symmetry * np.exp(-0.5 * (m / length) ** 2)) / (1.0 + symmetry)
+                norm = np.sqrt(np.diag(K))
+                K = K / np.outer(norm, norm)
+            else:
+                K = np.eye(N)
+            K[const, :] = 0.0
+            K[:, const] = 0.0
+            K[const, const] = 1.0
+            out[i * N : (i + 1) * N, i * N : (i + 1) * N] = K + 1e-6 * np.eye(N)
+        return out
+
     def force_slope_bounds(self, margin: float = 0.01) -> NDArray:
         """Bounds ``[[lo_f, hi_f], [lo_r, hi_r]]`` [N/rad] of ``d f_i/d alpha`` over all admissible weights.
 
@@ -241,9 +272,9 @@ def paper_basis() -> SoftClipBasis:
 
 def two_sided_basis(
     vehicle: VehicleParams | None = None,
-    breakpoints: Sequence[float] = (0.005, 0.01, 0.02, 0.04, 0.08, 0.2),
-    sharpness: float = 1000.0,
-    slope_range: tuple[float, float] = (-0.5, 0.25),
+    breakpoints: Sequence[float] = (0.002, 0.0045, 0.008, 0.013, 0.02, 0.031, 0.05, 0.09, 0.2),
+    sharpness: float = 5000.0,
+    slope_range: tuple[float, float] = (-0.8, 0.6),
     bias_level: float = 0.01,
     bias_bound: float = 0.5,
 ) -> SoftClipBasis:
@@ -280,15 +311,37 @@ def two_sided_basis(
     )  # fmt: skip
 
 
-BASIS_PRESETS = {"paper": paper_basis, "two_sided": two_sided_basis}
+def without_bias(basis: SoftClipBasis, name: str | None = None) -> SoftClipBasis:
+    """The basis without its constant (bias) members.
+
+    With ``(a_y, r)`` only, a force offset at zero slip cannot be told apart from a
+    sideslip offset (shifting both axle curves by the same slip leaves every measured force
+    and the known slip difference ``delta - L r / vx`` unchanged), so IMU-only estimation
+    imposes ``F(0) = 0`` instead of learning it.
+    """
+    keep = ~np.all(basis.lower == basis.upper, axis=0)
+    return SoftClipBasis(
+        basis.lower[:, keep], basis.upper[:, keep], basis.sharpness, basis.scale,
+        (basis.weight_lower[:, keep], basis.weight_upper[:, keep]), name or f"{basis.name}_no_bias",
+        offset=basis.offset[:, keep],
+    )  # fmt: skip
+
+
+def imu_basis(vehicle: VehicleParams | None = None, slope_fractions: tuple[float, float] = (0.1, 1.5)) -> SoftClipBasis:
+    """The two-sided segment basis without the bias member, learned slope in
+    ``slope_fractions`` times nominal (IMU-only estimation; see :func:`without_bias`)."""
+    lo, hi = slope_fractions
+    full = two_sided_basis(vehicle, slope_range=(lo - 1.0, hi - 1.0), bias_bound=0.0)
+    return without_bias(full, "imu_two_sided")
+
+
+BASIS_PRESETS = {"paper": paper_basis, "two_sided": two_sided_basis, "imu_two_sided": imu_basis}
 
 
 def make_basis(name: str | SoftClipBasis, vehicle: VehicleParams | None = None) -> SoftClipBasis:
-    """A preset by name (``two_sided`` default, ``paper``) or the basis itself."""
+    """A preset by name (``two_sided`` default, ``paper``, ``imu_two_sided``) or the basis itself."""
     if isinstance(name, SoftClipBasis):
         return name
-    if name == "paper":
-        return paper_basis()
-    if name == "two_sided":
-        return two_sided_basis(vehicle)
-    raise ParameterError(f"unknown basis preset {name!r}; presets are {sorted(BASIS_PRESETS)}")
+    if name not in BASIS_PRESETS:
+        raise ParameterError(f"unknown basis preset {name!r}; presets are {sorted(BASIS_PRESETS)}")
+    return paper_basis() if name == "paper" else BASIS_PRESETS[name](vehicle)

@@ -1,116 +1,198 @@
-"""One-call use of the observer: configuration, gain synthesis, warm start, results.
+r"""One-call estimation from a log, for every sensor set: calibrate, design, learn, refine, report.
 
 >>> from tire_learning_env import simulate
->>> from tire_learning_env.observer import ObserverConfig, estimate
->>> log = simulate("study1", 20.0)
->>> result = estimate(log.sensors, log.vehicle, config=ObserverConfig())
->>> cf, cr = result.cornering_stiffness()  # per tire [N/rad], slope of the learned curve at zero
->>> bool(abs(cf / log.vehicle.Cf - 1) < 0.02)
+>>> from tire_learning_env.params import CameraParams
+>>> from tire_learning_env.observer import estimate
+>>> log = simulate("lane_changes", 40.0, camera=CameraParams.paper_noise(rate=20.0))
+>>> result = estimate(log.sensors, log.vehicle.replace(Cf=1.1e5, Cr=0.95e5))  # a wrong nominal stiffness
+>>> result.sensors, result.verdict
+('both', 'identified')
+>>> cf, cr = result.cornering_stiffness()  # per tire [N/rad], with result.cornering_stiffness_std()
+>>> bool(abs(cf / log.vehicle.Cf - 1) < 0.02 and abs(cr / log.vehicle.Cr - 1) < 0.02)
 True
+
+Steps of :func:`estimate` (each reported in :attr:`EstimationResult.calibration`):
+
+1. **Sensors**: camera, IMU or both, from the columns present (or ``config.sensors``).
+2. **Noise** of every channel from the log (:mod:`.calibration`), unless given.
+3. **Gains**: certified for the measured noise, frame period and speed range (:mod:`.gains`).
+4. **Latency** of the camera: the prediction-error cost after one Gauss-Newton step is
+   profiled over candidate latencies, the minimum refined by a parabola (unless given).
+5. **Causal pass** from the nominal curve: what a car learns on line (:attr:`online`).
+6. **Offline refinement** over the whole log (:mod:`.offline`): the reported curve and
+   stiffness, with their two-sigma bands, the identifiability verdict and the learned
+   slip range (:attr:`offline`, :meth:`stiffness_report`).
+
+Nothing of the truth is used; a user who knows their camera or their stiffness can say
+so (``camera_noise``, ``latency``, ``stiffness_known``), and the result records what was
+estimated and what was assumed.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
-from typing import ClassVar
+from dataclasses import dataclass, field
+from typing import ClassVar, Mapping
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ..params import CameraParams, ParameterError, VehicleParams, _Params
-from .basis import SoftClipBasis, make_basis
-from .gains import ObserverGains, synthesize_gains
-from .neuro_adaptive import AdaptationParams, NeuroAdaptiveObserver, ObserverTrace
-from .warm_start import least_squares_weights
+from .basis import SoftClipBasis, imu_basis, make_basis
+from .calibration import estimate_noise_std, sample_period
+from .gains import GainDesign, ObserverGains, synthesize_gains
+from .model import MeasurementModel, measurement_model
+from .neuro_adaptive import AdaptationParams, HealthParams, NeuroAdaptiveObserver, axle_index
+from .offline import OfflineFit, calibrate_force_error, curve_gradient, pem_cost, refine, stiffness_readout
+from .trace import EstimateTrace
 
-__all__ = ["ObserverConfig", "build_observer", "estimate", "EstimationResult"]
+__all__ = ["ObserverConfig", "build_observer", "estimate", "EstimationResult", "detect_sensors", "NOISE_FLOOR"]
+
+#: smallest noise std used per channel (e1 [m], e2 [rad], a_y [m/s^2], r [rad/s]): resolution
+NOISE_FLOOR = np.array([1e-4, 1e-4, 0.01, 1e-4])
+#: noise assumed when a channel has too few samples to measure it
+NOISE_DEFAULT = np.array([0.01, 0.005, 0.5, 0.005])
+AXLES = ("front", "rear")
 
 
 @dataclass(frozen=True)
 class ObserverConfig(_Params):
-    """Everything that defines an observer run (all defaults documented in the README).
+    """Everything that defines an estimation; the defaults assume nothing about the camera,
+    the IMU or the tires beyond the vehicle file.
 
     Parameters
     ----------
+    sensors : {"auto", "camera", "imu", "both"}
+        Sensor set; ``auto`` reads every sensor the log has.
     basis : {"two_sided", "paper"}
-        Activation preset (:mod:`.basis`).
-    decay_rate : float
-        Required certified decay rate of the state error [1/s].
-    force_error_scale : float
-        Force error the gain is designed against [N].
-    objective : {"h2", "hinf"}
-        Gain-synthesis objective (:func:`.gains.synthesize_gains`).
-    state_weight : float
-        Weight of the state errors in the synthesis objective.
-    warm_start : bool
-        Run twice: least-squares weights from the first run start the second (SPEC §4).
+        Tire-curve basis (camera and fused; IMU-only uses the two-sided basis without its
+        bias member).
+    camera_noise : (float, float), optional
+        Camera noise std ``(e1 [m], e2 [rad])``; default: measured from the log.
+    imu_noise : (float, float), optional
+        IMU noise std ``(a_y [m/s^2], r [rad/s])``; default: measured from the log.
+    latency : float, optional
+        Camera latency [s]; default: estimated from the log (``max_latency`` at most).
+    max_latency : float
+        Largest latency considered [s].
+    stiffness_known : bool
+        The vehicle file's cornering stiffness is trusted: the curve is pinned to it below
+        ``linear_region_deg`` (the paper's Study 1 and 3 setting). Default: learned.
     linear_region_deg : float
-        Warm start: ``f_hat`` is set to zero below this slip [deg] (0 when the nominal
-        stiffness is not trusted, e.g. Study 2).
-    latency_compensation : bool
-        Compensate the camera latency (out-of-sequence correction).
-    law, initial_std, random_walk, max_std, step
-        Weight adaptation (:class:`.neuro_adaptive.AdaptationParams`).
-    warm_start_std : float, optional
-        Prior std of the weights in the second run, around the warm-start weights
-        (default ``initial_std``).
+        [deg], with ``stiffness_known``.
+    offline : bool
+        Refine over the whole log after the causal pass (the reported curve).
+    decay_rate, imu_decay_rate, camera_force_error, imu_force_error
+        Gain design (:class:`~.gains.GainDesign`).
+    initial_std, random_walk, max_std, prior_length, prior_symmetry, sensor_offsets
+        Weight prior and adaptation (:class:`~.neuro_adaptive.AdaptationParams`).
+    nis_factor : float
+        Health test margin (:class:`~.neuro_adaptive.HealthParams`).
+    identifiable_rel_2sigma : float
+        Stiffness reported as identified when its two-sigma band is within this fraction.
+    curve_rel_2sigma : float
+        Learned slip range: where the curve's two-sigma band is within this fraction.
     """
 
+    sensors: str = "auto"
     basis: str = "two_sided"
-    decay_rate: float = 1.0
-    force_error_scale: float = 100.0
-    objective: str = "h2"
-    state_weight: float = 1.0
-    warm_start: bool = True
+    camera_noise: tuple | None = None
+    imu_noise: tuple | None = None
+    latency: float | None = None
+    max_latency: float = 0.15
+    stiffness_known: bool = False
     linear_region_deg: float = 0.5
-    latency_compensation: bool = False
-    law: str = "rls"
-    initial_std: float = 0.25
+    offline: bool = True
+    decay_rate: float = 0.5
+    imu_decay_rate: float = 0.1
+    camera_force_error: float = 0.013
+    imu_force_error: float = 0.1
+    initial_std: float = 0.5
     random_walk: float = 0.0
     max_std: float = 1.0
-    step: float = 0.2
-    warm_start_std: float | None = None
     prior_length: float = 1.0
-    prior_symmetry: float = 0.0
+    prior_symmetry: float = 0.8
+    sensor_offsets: bool = True
+    nis_factor: float = 3.0
+    identifiable_rel_2sigma: float = 0.1
+    curve_rel_2sigma: float = 0.1
 
-    _positive: ClassVar[tuple[str, ...]] = ("force_error_scale", "initial_std", "max_std")
-    _non_negative: ClassVar[tuple[str, ...]] = ("decay_rate", "state_weight", "linear_region_deg", "random_walk")
+    _positive: ClassVar[tuple[str, ...]] = ("initial_std", "max_std", "nis_factor", "identifiable_rel_2sigma",
+                                            "curve_rel_2sigma", "camera_force_error", "imu_force_error")  # fmt: skip
+    _non_negative: ClassVar[tuple[str, ...]] = ("max_latency", "linear_region_deg", "decay_rate", "imu_decay_rate",
+                                                "random_walk", "prior_length", "prior_symmetry")  # fmt: skip
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.sensors not in ("auto", "camera", "imu", "both"):
+            raise ParameterError(f"ObserverConfig.sensors must be auto, camera, imu or both, got {self.sensors!r}")
         if self.basis not in ("two_sided", "paper"):
             raise ParameterError(f"ObserverConfig.basis must be 'two_sided' or 'paper', got {self.basis!r}")
-        if self.objective not in ("h2", "hinf"):
-            raise ParameterError(f"ObserverConfig.objective must be 'h2' or 'hinf', got {self.objective!r}")
-        self.adaptation()  # validates the adaptation fields
+        for name in ("camera_noise", "imu_noise"):
+            v = getattr(self, name)
+            if v is not None:
+                arr = np.asarray(v, dtype=float)
+                if arr.shape != (2,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+                    raise ParameterError(f"ObserverConfig.{name} must be two std values >= 0, got {v!r}")
+                object.__setattr__(self, name, tuple(float(x) for x in arr))
+        if self.latency is not None and not (math.isfinite(self.latency) and self.latency >= 0):
+            raise ParameterError(f"ObserverConfig.latency must be >= 0 s or None, got {self.latency!r}")
 
     @classmethod
     def for_camera(cls, camera: CameraParams, stiffness_known: bool = True, **overrides) -> "ObserverConfig":
-        """Settings matched to the camera and to what is known about the tire.
-
-        A noisy camera with a trusted nominal stiffness gets a low-bandwidth design
-        (``decay_rate=0.5``, ``force_error_scale=30`` N: the model error left is the tire
-        nonlinearity only); otherwise the defaults (1 1/s, 100 N: a wrong stiffness
-        makes force errors of a few hundred newtons that the gain must follow while the
-        weights learn). An unknown stiffness also drops the warm start's linear-region
-        rule (it would pin the slope at zero slip to the wrong nominal value).
-        """
-        noisy = camera.noise != "none" and (camera.e1_noise > 0 or camera.e2_noise > 0)
-        kw: dict = {}
-        if noisy and stiffness_known:
-            kw.update(decay_rate=0.5, force_error_scale=30.0)
-        if not stiffness_known:
-            kw.update(linear_region_deg=0.0)
+        """Settings for a camera whose specification is known (noise std and latency given)."""
+        kw: dict = {"camera_noise": tuple(camera.noise_std), "latency": camera.latency, "stiffness_known": stiffness_known}
         kw.update(overrides)
         return cls(**kw)
 
     def adaptation(self) -> AdaptationParams:
         return AdaptationParams(
-            law=self.law, initial_std=self.initial_std, random_walk=self.random_walk, max_std=self.max_std,
-            step=self.step, prior_length=self.prior_length, prior_symmetry=self.prior_symmetry,
+            initial_std=self.initial_std, random_walk=self.random_walk, max_std=self.max_std,
+            prior_length=self.prior_length, prior_symmetry=self.prior_symmetry, sensor_offsets=self.sensor_offsets,
         )  # fmt: skip
+
+    def gain_design(self) -> GainDesign:
+        return GainDesign(camera_decay_rate=self.decay_rate, imu_decay_rate=self.imu_decay_rate,
+                          camera_force_error=self.camera_force_error, imu_force_error=self.imu_force_error)  # fmt: skip
+
+
+def detect_sensors(sensors: Mapping[str, ArrayLike]) -> str:
+    """``camera``, ``imu`` or ``both`` from the columns that hold data."""
+
+    def has(k):
+        return k in sensors and np.any(np.isfinite(np.asarray(sensors[k], dtype=float)))
+
+    cam = has("e1") and has("e2") and (has("kappa") or has("psi_dot_des"))
+    imu = has("ay") and has("yaw_rate")
+    if cam and imu:
+        return "both"
+    if cam:
+        return "camera"
+    if imu:
+        return "imu"
+    raise ParameterError("the log has neither camera columns (e1, e2, kappa) nor IMU columns (ay, yaw_rate) with data")
+
+
+def _basis_for(model: MeasurementModel, config: ObserverConfig, vehicle: VehicleParams) -> SoftClipBasis:
+    if model.uses_camera:
+        return make_basis(config.basis, vehicle)
+    if config.basis != "two_sided":
+        raise ParameterError(
+            f"basis {config.basis!r} is not available for IMU-only estimation: the paper's basis is one-sided and "
+            "carries bias members that an IMU cannot tell from a sideslip offset; use 'two_sided'"
+        )
+    return imu_basis(vehicle)
+
+
+def _quantise(x: float, per_decade: int = 20) -> float:
+    """Round to a log grid (cache reuse of gain designs across similar logs)."""
+    return float(10 ** (round(math.log10(x) * per_decade) / per_decade))
+
+
+def _slope_box(basis: SoftClipBasis, vehicle: VehicleParams) -> NDArray:
+    nl = basis.force_slope_bounds(margin=0.0)
+    return nl + np.array([[2.0 * vehicle.Cf], [2.0 * vehicle.Cr]])
 
 
 def build_observer(
@@ -121,124 +203,414 @@ def build_observer(
     basis: SoftClipBasis | None = None,
     initial_weights: NDArray | None = None,
     cache: bool = True,
+    sensors: str = "camera",
+    noise_std: ArrayLike | None = None,
+    latency: float | None = None,
+    speed_range: tuple[float, float] | None = None,
+    frame_period: float | None = None,
+    imu_period: float | None = None,
 ) -> NeuroAdaptiveObserver:
-    """Synthesize (or load) certified gains for the camera and build the observer.
+    """Certified gains (solved or loaded and re-certified) and the observer.
 
-    The frame period is ``1 / camera.rate`` (at least ``physics_dt``) and the noise
-    level the camera's.
+    For use inside an environment (the wrapper): the camera's specification gives the frame
+    period, noise and latency unless ``noise_std``/``latency`` say otherwise; the speed range
+    defaults to the vehicle's speed with the design margin.
     """
-    camera = camera or CameraParams()
     config = config or ObserverConfig()
-    basis = basis or make_basis(config.basis, vehicle)
-    frame_period = max(1.0 / camera.rate, physics_dt)
-    gains = synthesize_gains(
-        vehicle,
-        basis,
-        frame_period,
-        decay_rate=config.decay_rate,
-        noise_std=camera.noise_std,
-        force_error_scale=config.force_error_scale,
-        state_weight=config.state_weight,
-        objective=config.objective,
-        cache=cache,
-    )
-    return NeuroAdaptiveObserver(
-        vehicle,
-        basis,
-        gains,
-        physics_dt,
-        adaptation=config.adaptation(),
-        camera=camera,
-        latency_compensation=config.latency_compensation,
-        initial_weights=initial_weights,
-    )
+    model = measurement_model(sensors)
+    camera = camera or CameraParams()
+    basis = basis or _basis_for(model, config, vehicle)
+    if noise_std is None:
+        cam_std = config.camera_noise if config.camera_noise is not None else camera.noise_std
+        imu_std = config.imu_noise if config.imu_noise is not None else NOISE_DEFAULT[2:]
+        noise_std = np.r_[cam_std, imu_std]
+    noise = np.maximum(np.asarray(noise_std, dtype=float), NOISE_FLOOR)
+    if latency is None:
+        latency = config.latency if config.latency is not None else (camera.latency if model.uses_camera else 0.0)
+    if frame_period is None:
+        frame_period = max(1.0 / camera.rate, physics_dt) if model.uses_camera else physics_dt
+    if speed_range is None:
+        speed_range = (vehicle.vx, vehicle.vx)
+    box = _slope_box(basis, vehicle)
+    noise_design = np.array([_quantise(v) for v in noise])
+    gains = synthesize_gains(vehicle, model, float(f"{frame_period:.4g}"), noise_design, speed_range, box,
+                             config.gain_design(), imu_period=imu_period, cache=cache)  # fmt: skip
+    axle_load = 0.5 * vehicle.m * 9.81
+    fe = (config.camera_force_error if model.uses_camera else config.imu_force_error) * axle_load
+    obs = NeuroAdaptiveObserver(
+        vehicle, basis, gains, noise, latency=float(latency), force_error=fe, force_error_period=frame_period,
+        adaptation=config.adaptation(), health=HealthParams(nis_factor=config.nis_factor),
+        initial_weights=initial_weights, physics_dt=physics_dt, sample_period=frame_period,
+        pinned_slip=math.radians(config.linear_region_deg) if config.stiffness_known else 0.0,
+    )  # fmt: skip
+    return obs
 
 
 @dataclass
 class EstimationResult:
-    """What :func:`estimate` returns.
+    """What :func:`estimate` returns (the same for camera, IMU and fused estimation).
 
     Attributes
     ----------
-    trace : ObserverTrace
-        Final run (after the warm start when enabled).
-    online_trace : ObserverTrace
-        First run, from zero weights: what a car learns causally on its first drive.
+    sensors : {"camera", "imu", "both"}
+    online : EstimateTrace
+        Causal pass from the nominal curve (what a car learns on line).
+    offline : EstimateTrace or None
+        Pass with the refined weights held (``None`` without offline refinement).
     observer : NeuroAdaptiveObserver
-        The observer at the end of the final run (its weights are the learned curve).
+        Holds the reported weights and their covariance.
     gains : ObserverGains
-        The certified gain.
-    initial_weights : ndarray or None
-        Least-squares warm-start weights (``None`` without warm start).
-    runtime_s : float
-        Wall time of both runs (gain synthesis excluded; see ``gains.solve_s``).
+    fit : OfflineFit or None
+    online_weights : ndarray
+        Weights at the end of the causal pass.
+    calibration : dict
+        What was estimated from the log and what was given or assumed.
+    runtime_s : dict
+        Wall times of the steps [s].
     """
 
-    trace: ObserverTrace
-    online_trace: ObserverTrace
+    sensors: str
+    online: EstimateTrace
+    offline: EstimateTrace | None
     observer: NeuroAdaptiveObserver
     gains: ObserverGains
-    initial_weights: NDArray | None
-    runtime_s: float
+    fit: OfflineFit | None
+    online_weights: NDArray
+    calibration: dict
+    runtime_s: dict
+    config: ObserverConfig = field(default_factory=ObserverConfig)
 
-    def axle_force(self, alpha: NDArray, axle: str) -> NDArray:
-        """Learned total axle force [N] (eq. 29)."""
-        return self.observer.axle_force(alpha, axle)
+    @property
+    def trace(self) -> EstimateTrace:
+        """The reported pass: offline when refined, else the causal one."""
+        return self.offline if self.offline is not None else self.online
 
-    def cornering_stiffness(self) -> tuple[float, float]:
-        """Per-tire cornering stiffness of the learned curve at zero slip [N/rad]."""
-        return self.observer.cornering_stiffness()
+    @property
+    def online_trace(self) -> EstimateTrace:
+        return self.online
+
+    @property
+    def vehicle(self) -> VehicleParams:
+        return self.observer.vehicle
+
+    @property
+    def weights(self) -> NDArray:
+        return self.fit.weights if self.fit is not None else self.online_weights
+
+    # -- curves -------------------------------------------------------------------------------
+    def axle_force(self, alpha: ArrayLike, axle: str) -> NDArray:
+        """Learned total axle force [N] (eq. 29): the reported (refined) curve."""
+        return self.observer.axle_force(alpha, axle, weights=self.weights)
+
+    def online_axle_force(self, alpha: ArrayLike, axle: str) -> NDArray:
+        """The curve at the end of the causal pass [N]."""
+        return self.observer.axle_force(alpha, axle, weights=self.online_weights)
 
     def online_curve_at(self, k: int):
-        """The online (first-run) curve with the weights held at row ``k``."""
-        w = self.online_trace.weights[k]
+        """The causal curve with the weights held at row ``k`` of the causal pass."""
+        w = self.online.weights[k]
         return lambda alpha, axle: self.observer.axle_force(alpha, axle, weights=w)
+
+    def nominal_axle_force(self, alpha: ArrayLike, axle: str) -> NDArray:
+        v = self.vehicle
+        return 2.0 * (v.Cf if axle_index(axle) == 0 else v.Cr) * np.asarray(alpha, dtype=float)
+
+    def _variance(self, G: NDArray) -> NDArray:
+        if self.fit is not None:
+            return self.fit.variance(G)
+        pw = self.observer.pw
+        return np.einsum("ij,jk,ik->i", G, pw, G)
+
+    def axle_force_std(self, alpha: ArrayLike, axle: str) -> NDArray:
+        """Standard deviation of the learned axle force at ``alpha`` [N]."""
+        a = np.asarray(alpha, dtype=float)
+        G = curve_gradient(self.observer, a.ravel(), axle_index(axle))
+        return np.sqrt(np.maximum(self._variance(G), 0.0)).reshape(a.shape)
+
+    # -- stiffness ----------------------------------------------------------------------------
+    def stiffness_functionals(self) -> tuple[NDArray, list]:
+        """``(g (2, nw), info)``: per-tire stiffness ``= C_nominal + g^T w`` read from the linear
+        range of the learned curves (:func:`.offline.stiffness_readout`)."""
+        if "_readout" not in self.calibration:
+            gs, infos = [], []
+            for i in (0, 1):
+                g, info = stiffness_readout(self.observer, self.weights, self.trace.slip[:, i], i)
+                gs.append(g)
+                infos.append(info)
+            self.calibration["_readout"] = (np.vstack(gs), infos)
+        return self.calibration["_readout"]
+
+    def cornering_stiffness(self) -> tuple[float, float]:
+        """Per-tire cornering stiffness of the learned curves [N/rad]: half the slope at zero slip
+        of a polynomial fitted over their linear range (:func:`.offline.stiffness_readout`)."""
+        G, _ = self.stiffness_functionals()
+        v = self.vehicle
+        k = np.array([v.Cf, v.Cr]) + G @ self.weights
+        return float(k[0]), float(k[1])
+
+    def cornering_stiffness_std(self) -> tuple[float, float]:
+        """Standard deviation of :meth:`cornering_stiffness` [N/rad] (sandwich covariance)."""
+        G, _ = self.stiffness_functionals()
+        s = np.sqrt(np.maximum(self._variance(G), 0.0))
+        return float(s[0]), float(s[1])
+
+    def stiffness_report(self) -> dict:
+        """Per axle: estimate, std, two-sigma band [N/rad] (per tire) and whether it is identified."""
+        k = self.cornering_stiffness()
+        s = self.cornering_stiffness_std()
+        out = {}
+        for i, a in enumerate(AXLES):
+            ident = bool(2.0 * s[i] <= self.config.identifiable_rel_2sigma * abs(k[i]))
+            out[a] = {
+                "identified": ident,
+                "estimate_N_per_rad": float(k[i]) if ident else None,
+                "value_N_per_rad": float(k[i]),
+                "std_N_per_rad": float(s[i]),
+                "band_2sigma_N_per_rad": [float(k[i] - 2 * s[i]), float(k[i] + 2 * s[i])],
+                "relative_2sigma": float(2 * s[i] / abs(k[i])) if k[i] else float("inf"),
+            }
+        return out
+
+    @property
+    def verdict(self) -> str:
+        """``identified`` when both axles' stiffness is identified, else ``not_identifiable``."""
+        rep = self.stiffness_report()
+        return "identified" if all(r["identified"] for r in rep.values()) else "not_identifiable"
+
+    def learned_slip_range(self, n: int = 201) -> dict:
+        """Per axle ``[lo, hi]`` [deg]: the contiguous slip range around zero, inside the slip the
+        drive covered, where the curve's two-sigma band is within ``curve_rel_2sigma`` of the force."""
+        tr = self.trace
+        out = {}
+        for i, a in enumerate(AXLES):
+            s = tr.slip[:, i][np.isfinite(tr.slip[:, i])]
+            if len(s) < 10:
+                out[a] = None
+                continue
+            lo, hi = np.percentile(s, [0.5, 99.5])
+            grid = np.linspace(min(lo, 0.0), max(hi, 0.0), n)
+            F = np.abs(self.axle_force(grid, a))
+            sd = self.axle_force_std(grid, a)
+            ok = (2.0 * sd <= self.config.curve_rel_2sigma * F) | (np.abs(grid) < math.radians(0.05))
+            j0 = int(np.argmin(np.abs(grid)))
+            if not ok[j0] or self.stiffness_report()[a]["identified"] is False:
+                out[a] = None
+                continue
+            l = j0
+            while l > 0 and ok[l - 1]:
+                l -= 1
+            h = j0
+            while h < n - 1 and ok[h + 1]:
+                h += 1
+            out[a] = [math.degrees(grid[l]), math.degrees(grid[h])]
+        return out
+
+    def summary(self) -> dict:
+        """Headline figures (the ``summary`` block of ``metrics.json``)."""
+        rep = self.stiffness_report()
+        return {
+            "sensors": self.sensors,
+            "verdict": self.verdict,
+            "stiffness_front_N_per_rad": rep["front"]["estimate_N_per_rad"],
+            "stiffness_front_2sigma_N_per_rad": rep["front"]["band_2sigma_N_per_rad"],
+            "stiffness_rear_N_per_rad": rep["rear"]["estimate_N_per_rad"],
+            "stiffness_rear_2sigma_N_per_rad": rep["rear"]["band_2sigma_N_per_rad"],
+            "health_final": self.online.final_health,
+            "health_ok_fraction": self.online.health_fraction["ok"],
+            "runtime_s": float(self.runtime_s.get("total", float("nan"))),
+        }
+
+
+def _noise(config: ObserverConfig, rows: Mapping, model: MeasurementModel, camera: CameraParams | None) -> tuple[NDArray, dict]:
+    """Noise std of the 4 channels and how each was obtained."""
+    out = NOISE_DEFAULT.copy()
+    info: dict = {}
+    t = np.asarray(rows["t"], dtype=float)
+    given = {}
+    if config.camera_noise is not None:
+        given["camera"] = config.camera_noise
+    elif camera is not None:
+        given["camera"] = tuple(camera.noise_std)
+    if config.imu_noise is not None:
+        given["imu"] = config.imu_noise
+    for group, chans, idx in (("camera", ("e1", "e2"), (0, 1)), ("imu", ("ay", "yaw_rate"), (2, 3))):
+        used = model.uses_camera if group == "camera" else model.uses_imu
+        if not used:
+            continue
+        if group in given:
+            out[list(idx)] = given[group]
+            info[group] = {"source": "given", "std": [float(v) for v in given[group]]}
+            continue
+        est = {}
+        for c, i in zip(chans, idx):
+            e = estimate_noise_std(t, rows[c])
+            est[c] = e.to_dict()
+            if math.isfinite(e.std):
+                out[i] = e.std
+        info[group] = {"source": "estimated from the log (local polynomial residuals)", "channels": est}
+    floored = np.maximum(out, NOISE_FLOOR)
+    info["std_used"] = dict(zip(("e1_m", "e2_rad", "ay_mps2", "yaw_rate_radps"), floored.tolist()))
+    info["floor"] = NOISE_FLOOR.tolist()
+    return floored, info
+
+
+def _profile_window(t: NDArray, delta: NDArray, max_s: float = 120.0) -> slice:
+    """The ``max_s`` window with the most steering activity (the whole log if shorter)."""
+    if t[-1] - t[0] <= 1.25 * max_s:
+        return slice(0, len(t))
+    dt = float(np.median(np.diff(t)))
+    n = max(int(max_s / dt), 10)
+    d = np.nan_to_num(np.diff(delta, prepend=delta[0])) ** 2
+    c = np.cumsum(d)
+    act = c[n:] - c[:-n]
+    s = int(np.argmax(act)) if len(act) else 0
+    return slice(s, s + n)
+
+
+def _estimate_latency(obs: NeuroAdaptiveObserver, rows: dict, config: ObserverConfig) -> tuple[float, dict]:
+    """Profile the one-step prediction-error cost over candidate latencies (module docstring)."""
+    win = _profile_window(rows["t"], rows["delta"])
+    sub = {k: v[win] for k, v in rows.items()}
+    w0 = np.zeros(obs.n_weights)
+    load = 0.5 * obs.vehicle.m * 9.81
+    calibrate_force_error(obs, sub, w0, float(sub["t"][0]) + obs.settle_s, 25.0, (1e-4 * load, 3e-2 * load))
+    cands = [c for c in (0.0, 0.01, 0.02, 0.035, 0.05, 0.07, 0.1, 0.13) if c <= config.max_latency + 1e-12]
+    costs = {}
+
+    def cost(d):
+        d = round(float(d), 4)
+        if d not in costs:
+            obs.latency = d
+            obs.reset()
+            J, n = pem_cost(obs, sub, w0)
+            costs[d] = J / max(n, 1)
+        return costs[d]
+
+    for c in cands:
+        cost(c)
+    ds = sorted(costs)
+    j = int(np.argmin([costs[d] for d in ds]))
+    best = ds[j]
+    if 0 < j < len(ds) - 1:  # parabola through the minimum and its neighbours
+        x0, x1, x2 = ds[j - 1], ds[j], ds[j + 1]
+        y0, y1, y2 = costs[x0], costs[x1], costs[x2]
+        den = (x0 - x1) * (x0 - x2) * (x1 - x2)
+        a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / den
+        b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / den
+        if a > 0:
+            xv = float(np.clip(-b / (2 * a), x0, x2))
+            if cost(xv) < costs[best]:
+                best = round(xv, 4)
+    elif j == 0 and len(ds) > 1:
+        for xv in (ds[1] / 4, ds[1] / 2):
+            if cost(xv) < costs[best]:
+                best = round(xv, 4)
+    obs.latency = best
+    obs.reset()
+    return best, {
+        "source": "estimated from the log (prediction-error profile)",
+        "latency_s": best,
+        "profile_s_to_cost_per_update": {f"{k:.4f}": v for k, v in sorted(costs.items())},
+        "window_s": [float(sub["t"][0]), float(sub["t"][-1])],
+    }
 
 
 def estimate(
-    sensors: dict[str, NDArray],
+    sensors: Mapping[str, ArrayLike],
     vehicle: VehicleParams,
     camera: CameraParams | None = None,
     config: ObserverConfig | None = None,
     physics_dt: float | None = None,
     cache: bool = True,
 ) -> EstimationResult:
-    """Run the observer over logged sensor rows (optionally twice, with the warm start).
+    """Estimate the states and the tire curves from logged sensor rows (module docstring).
 
     Parameters
     ----------
-    sensors : dict of arrays
-        Rows ``t, delta, vx, psi_dot_des, psi_ddot_des, e1, e2`` (no ``true_*``).
+    sensors : mapping of str -> array
+        ``t, delta, vx`` (``ax`` optional) and the camera (``kappa`` or ``psi_dot_des``,
+        ``e1``, ``e2``) and/or IMU (``ay``, ``yaw_rate``) columns; NaN = no sample. No
+        ``true_*`` (refused).
     vehicle : VehicleParams
-        Nominal vehicle.
+        Nominal vehicle (the vehicle file).
     camera : CameraParams, optional
-        Rate and noise the gains are designed for (default: inferred rate, no noise).
+        A camera specification the user trusts: its noise std and latency are used instead
+        of being estimated.
     config : ObserverConfig, optional
     physics_dt : float, optional
-        Row spacing [s]; default the median spacing of ``t``.
+        Prediction step after the last row [s]; default the median row spacing.
     """
     config = config or ObserverConfig()
-    t = np.asarray(sensors["t"], dtype=float)
-    if len(t) < 2:
-        raise ParameterError("need at least two rows to estimate")
+    t_all = time.perf_counter()
+    runtime: dict = {}
+    name = detect_sensors(sensors) if config.sensors == "auto" else config.sensors
+    model = measurement_model(name)
+    from .neuro_adaptive import sensor_rows
+
+    rows_k = sensor_rows(sensors, model)  # validates the columns
+    t = rows_k["t"]
+    if len(t) < 20:
+        raise ParameterError(f"need at least 20 rows to estimate, got {len(t)}")
+    if not np.all(np.diff(t) > 0):
+        raise ParameterError("time must be strictly increasing")
+    rows = {"t": t, "delta": rows_k["delta"], "vx": rows_k["vx"], "ax": rows_k["ax"], "kappa": rows_k["kappa"]}
+    rows.update(e1=rows_k["z"][:, 0], e2=rows_k["z"][:, 1], ay=rows_k["z"][:, 2], yaw_rate=rows_k["z"][:, 3])
     dt = float(np.median(np.diff(t))) if physics_dt is None else float(physics_dt)
-    if camera is None:
-        frames = np.flatnonzero(np.isfinite(np.asarray(sensors["e1"], dtype=float)))
-        rate = 1.0 / (float(np.median(np.diff(t[frames]))) if len(frames) > 1 else dt)
-        camera = CameraParams(rate=rate)
-    observer = build_observer(vehicle, camera, config, dt, cache=cache)
     t0 = time.perf_counter()
-    online = observer.run(sensors)
-    w0 = None
-    trace = online
-    if config.warm_start:
-        w0 = least_squares_weights(
-            observer.basis, online, linear_region=math.radians(config.linear_region_deg),
-            prior=observer.basis.prior_correlation(config.prior_length, config.prior_symmetry),
-        )  # fmt: skip
-        if config.warm_start_std is not None:
-            observer.adaptation = replace(observer.adaptation, initial_std=config.warm_start_std)
-        observer.reset(weights=w0)
-        trace = observer.run(sensors)
-    runtime = time.perf_counter() - t0
-    return EstimationResult(trace, online, observer, observer.gains, w0, runtime)
+    noise, noise_info = _noise(config, rows, model, camera)
+    frame_period = sample_period(t, rows["e1"]) if model.uses_camera else sample_period(t, rows["ay"])
+    imu_period = sample_period(t, rows["ay"]) if model.uses_imu else None
+    meas = np.isfinite(rows["e1"] if model.uses_camera else rows["ay"])
+    vx_m = rows["vx"][meas] if meas.any() else rows["vx"]
+    speed_range = (float(np.floor(max(np.percentile(vx_m, 0.5), 3.0))), float(np.ceil(np.percentile(vx_m, 99.5)) + 1e-9))
+    runtime["calibration_noise"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    latency_given = config.latency if config.latency is not None else (camera.latency if camera is not None else None)
+    obs = build_observer(
+        vehicle, None, config, dt, cache=cache, sensors=model.name, noise_std=noise,
+        latency=latency_given or 0.0, speed_range=speed_range, frame_period=float(f"{frame_period:.4g}"),
+        imu_period=None if imu_period is None else float(f"{imu_period:.4g}"),
+    )  # fmt: skip
+    runtime["gains"] = time.perf_counter() - t0
+    calibration = {
+        "sensors": model.name,
+        "sensors_source": "detected from the log's columns" if config.sensors == "auto" else "given",
+        "noise": noise_info,
+        "frame_period_s": frame_period,
+        "imu_period_s": imu_period,
+        "speed_range_mps": list(speed_range),
+        "row_period_median_s": dt,
+        "vehicle": vehicle.to_dict(),
+        "stiffness": "given (pinned below the linear region)" if config.stiffness_known else "learned (the vehicle "
+        "file's Cf, Cr are only the starting point)",
+    }
+    if model.uses_camera:
+        if latency_given is None:
+            t0 = time.perf_counter()
+            _, lat_info = _estimate_latency(obs, rows, config)
+            runtime["calibration_latency"] = time.perf_counter() - t0
+        else:
+            lat_info = {"source": "given", "latency_s": float(latency_given)}
+        calibration["latency"] = lat_info
+    # causal pass from the nominal curve
+    t0 = time.perf_counter()
+    obs.reset()
+    online = obs.run(rows)
+    online_w = obs.weights
+    runtime["online_pass"] = time.perf_counter() - t0
+    fit = None
+    offline = None
+    if config.offline:
+        t0 = time.perf_counter()
+        fit = refine(obs, rows, online_w, prior_cov=obs.prior_covariance())
+        offline = fit.trace
+        runtime["offline_refinement"] = time.perf_counter() - t0
+        calibration["offline"] = {
+            "method": "prediction-error fit with the Kalman predictor of the same model (Gauss-Newton)",
+            "iterations": fit.iterations, "updates": fit.updates, "cost": fit.cost,
+            "force_error_calibration": fit.force_error_calibration, "nis_per_dof": fit.nis_per_dof,
+        }  # fmt: skip
+    else:
+        obs.reset(weights=online_w)
+    runtime["total"] = time.perf_counter() - t_all
+    return EstimationResult(model.name, online, offline, obs, obs.gains, fit, online_w, calibration, runtime, config)

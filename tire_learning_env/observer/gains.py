@@ -1,61 +1,61 @@
-r"""Observer gain synthesis with vertex LMIs (cvxpy), certified independently with numpy.
+r"""Certified correction gains from vertex LMIs (cvxpy), re-checked with numpy: one pipeline
+for every measurement model.
 
 Why not the paper's Theorem 1
 -----------------------------
 SPEC §3 proves that LMI (24) holds at no decay rate ``alpha >= 0``: the tire force enters
 two integrators away from the camera outputs (``C F = 0``) and at any frozen activation
 vector only 2 of the ``2N`` weight directions reach the state, so no quadratic Lyapunov
-function can decrease along the weight error with a constant adaptation gain ``K``.
-We therefore certify a different, provable property and learn the weights with a
-sensitivity-based adaptation law (:mod:`.neuro_adaptive`), whose gain
-``K(t) = P_w(t) Psi(t)^T S(t)^{-1}`` is computed on line, not by the LMI.
+function decreases along the weight error with a constant adaptation gain ``K``. We
+certify a different, provable property and learn the weights with a sensitivity-based
+recursive least-squares law (:mod:`._kernel`), whose gain is computed on line.
 
-What is certified (Theorem, discrete time, frame period ``T``)
---------------------------------------------------------------
-The observer corrects the state at camera frames with the gain ``L`` and predicts with
-the exactly discretised model (:func:`discretize`). Over one frame the posterior
-state-estimation error obeys
+What is certified
+-----------------
+A *group* of measurement channels (camera ``[e1, e2]`` or IMU ``[a_y, r]``) corrects the state
+every ``T`` seconds with a gain ``L_c`` chosen by the speed cell ``c``. Freeze, over one
+period, the speed ``vx`` and the total axle slopes ``k_i`` between the true and the estimated
+slip (the linear part ``2 C_i`` plus the slope of the learned part, in the box the basis'
+weight bounds allow: the paper's H1/H2 and ``W_max`` construction). Then the posterior
+state error obeys
 
-    e_{k+1} = (I - L C) [ (A_T + B_T D_k H) e_k + B_T d_k ] - L v_{k+1}
+    e_{k+1} = (I - L C)(A e_k + B d_k + W u_k) - L D d'_{k+1} - L v_{k+1}
 
-where ``A_T = exp(A T)``, ``B_T = int_0^T exp(A s) ds F``, ``H = d alpha / d xi`` (eq. 13),
-``D_k = diag(d_f, d_r)`` is the slope of the *model's* nonlinear force between the true
-and the estimated slip (mean-value theorem on ``f_hat``; the paper's ``G Omega sigma~``
-term), which lies in the box ``[d_lo, d_hi]`` per axle that the basis slope bounds and the
-weight bounds imply (:meth:`.basis.SoftClipBasis.force_slope_bounds`, the paper's H1/H2
-and ``W_max`` construction), ``d_k`` is the force error of the model at the true slip
-[N] (weight error and basis residual) and ``v`` the camera noise. With ``A_v`` the four
-vertices of the box, ``A_cl,v = (I - L C) A_v`` and ``Y = P L``, the default objective
-``"h2"`` solves (affine in ``P``, ``Y``, ``Z``)
+with ``A = exp(A_c T)`` and ``B`` the exact zero-order-hold maps of the linearised model
+(:func:`.model.linear_matrices`), ``d``, ``d'`` axle force errors of the model (weight error
+and basis residual) [N], ``v`` the measurement noise, ``C``, ``D`` the group's output
+matrices (``D`` is the ``a_y`` feedthrough of the force), and ``W u`` the noise that other
+sensors inject while the state is predicted (fused estimation: the IMU corrections made
+between two camera frames with the already certified IMU gain). With ``Y_c = P L_c``, the
+robust-H2 LMIs (scaled states and inputs; one common ``P``)
 
-    minimise trace(Z)  subject to, at every vertex v,
-        [[rho^2 P - Hs^T Hs,  A_cl,v^T P],
-         [P A_cl,v,           P         ]] >= 0                 (decay rho = exp(-alpha T))
-        [[Z,        Bw^T P],
-         [P Bw,     P     ]] >= 0,        P Bw = [P B_T - Y C B_T, -Y]  (scaled)
+    [[rho^2 P - Hs^T Hs,   (P A - Y C A)^T],           [[Z_c,   (P Bw)^T],
+     [P A - Y C A,          P             ]] >= 0,       [P Bw,   P      ]] >= 0,
+    P Bw = [P B - Y C B,  P W - Y C W,  -Y D,  -Y],    trace Z_c <= t,    minimise t
 
-(:func:`_h2_matrices`), and ``"hinf"`` the bounded-real-lemma version
-(:func:`_vertex_matrix`). If they hold, then for every ``D_k`` in the box, however it
-varies in time,
+are imposed at the vertices of every cell: the four corners of the slope box at the lower,
+middle and upper speed of the cell. ``A`` and ``C`` depend on the slopes and the speed
+through ``exp`` and ``1/vx``, so the vertices do not bound the interior exactly: every
+solution is therefore re-checked with numpy at the vertices (positive ``P``, largest
+eigenvalue of ``-LMI`` at most ``tol``) *and* on a dense grid of slopes and speeds in every
+cell (contraction of ``e^T P e``). When both hold,
 
-1. with exact weights and no noise the state error decays at least as fast as
-   ``exp(-alpha t)``: the certified *decay rate* (recomputed from ``P`` and ``L``);
-2. the state error is input-to-state stable with respect to the force error and the
-   noise; for white unit-variance normalised inputs its weighted mean square (slip error
-   in mrad and scaled states) is at most ``trace(Z)`` (``h2``), or its L2 gain at most
-   ``sqrt(g)`` (``hinf``).
+1. with exact weights and no noise the state error decays at least at the certified rate
+   (``-ln(rho)/T``, ``rho`` the worst contraction over vertices and grid), for any speed
+   trajectory in the range (common ``P``: arbitrary switching between cells);
+2. the state error is input-to-state stable with respect to the force error and the noise,
+   and for white unit-variance normalised inputs its weighted mean square (slip errors in
+   mrad and the scaled states) is at most ``t`` at the vertices.
 
-The weights stay in their box by projection. Their convergence to the best
-approximation (and with it the state error to zero) needs the sensitivity regressor
-``C Upsilon`` to be persistently exciting: the standard adaptive-observer result
-(Q. Zhang, IEEE TAC 47(3), 2002), which the LMI does not certify and the studies show in
-simulation. The sampled-data model holds ``D`` constant over a frame (exact for a linear
-model; first order in ``T`` otherwise), which we state rather than hide.
+Not certified: the convergence of the weights (it needs persistent excitation; the
+studies and the benchmark show it), a period other than ``T`` (dropped frames make the
+prediction longer; the health flag watches that), slopes and speeds outside the box, and
+the interleaving of groups beyond what the fused design contains.
 
-Every result is re-checked with numpy (:func:`certify`): ``P`` positive definite and
-the largest eigenvalue of ``-LMI`` at every vertex ``<= tol``. Infeasible requests raise
-:class:`InfeasibleLMIError` naming the vertex that fails and by how much. Results are
-cached on disk keyed by all inputs; a cache hit is re-certified, not re-solved.
+Fused estimation designs the IMU group first (2 body states), then the camera group on
+all 4 states with the IMU corrections inside the prediction over a frame. Results are
+cached on disk keyed by every input; a cache hit is re-certified, never trusted; a
+corrupt cache file is ignored and rewritten.
 """
 
 from __future__ import annotations
@@ -63,471 +63,591 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import math
 import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import scipy.linalg as sla
 from numpy.typing import NDArray
 
-from ..dynamics import error_state_matrices, slip_jacobian
-from ..params import ParameterError, VehicleParams
-from .basis import SoftClipBasis
+from ..params import ParameterError, VehicleParams, _Params
+from .model import MeasurementModel, linear_matrices, measurement_model, slip_jacobian
 
 __all__ = [
     "InfeasibleLMIError",
+    "GainDesign",
     "ObserverGains",
-    "discretize",
+    "GroupCertificate",
     "synthesize_gains",
-    "certify",
+    "speed_cells",
     "default_cache_dir",
+    "STATE_SCALE",
 ]
 
-_VERSION = 4  # bump when the formulation changes (invalidates the cache)
-#: state scaling used inside the solve: typical magnitudes of e1 [m], e1_dot [m/s], e2 [rad], e2_dot [rad/s]
-STATE_SCALE = np.array([0.05, 0.05, 0.005, 0.02])
-SLIP_SCALE = 1e-3  # [rad]: performance output unit
-NOISE_FLOOR = np.array([1e-4, 1e-4])  # [m, rad]: measurement resolution assumed for a noise-free camera
+_VERSION = 5  # bump when the formulation changes (invalidates the cache)
+#: scaling of ``[vy [m/s], r [rad/s], e1 [m], e2 [rad]]`` inside the solve
+STATE_SCALE = np.array([0.05, 0.01, 0.05, 0.005])
+SLIP_SCALE = 1e-3  # [rad]: slip-error unit of the performance output (mrad)
 
 
 class InfeasibleLMIError(RuntimeError):
     """The gain LMIs have no solution (or the solver's answer fails the numpy certificate)."""
 
 
+def default_cache_dir() -> Path:
+    """``$TIRE_LEARNING_CACHE`` or ``~/.cache/tire_learning_env``, sub-folder ``gains``."""
+    return Path(os.environ.get("TIRE_LEARNING_CACHE", Path.home() / ".cache" / "tire_learning_env")) / "gains"
+
+
 @dataclass(frozen=True)
-class Discretization:
-    """Exact zero-order-hold discretisation of the error-state model over a step ``dt``."""
+class GainDesign(_Params):
+    """Design settings of the certified gains (physical defaults, not fitted to any log).
 
-    dt: float
-    Ad: NDArray  # exp(A dt), (4, 4)
-    Bd: NDArray  # int exp(A s) ds [B1 B2 B3], (4, 3)
-    Fd: NDArray  # int exp(A s) ds F, (4, 2)
+    Parameters
+    ----------
+    camera_decay_rate, imu_decay_rate : float
+        Required certified decay rate of the state error [1/s] with camera / IMU corrections.
+    camera_force_error, imu_force_error : float
+        Force error the gains reject, as a fraction of the mean static axle load [-]
+        (a lane camera sees gentle driving: 1.3 %; an IMU design also covers hard driving
+        near the limit: 10 %).
+    state_weight : float
+        Weight of the scaled states beside the slip errors (mrad) in the H2 cost.
+    cell_ratio : float
+        Speed cells are geometric with this ratio of upper to lower edge.
+    speed_margin : float
+        The certified speed range is the log's widened by this fraction on both sides.
+    max_steer : float
+        Largest road-wheel angle covered [rad] (the front force acts through ``cos(delta)``).
+    solver : {"CLARABEL", "SCS"}
+    tol : float
+        Certificate tolerance (relative largest eigenvalue of ``-LMI``).
+    """
+
+    camera_decay_rate: float = 0.5
+    imu_decay_rate: float = 0.1
+    camera_force_error: float = 0.013
+    imu_force_error: float = 0.1
+    state_weight: float = 1.0
+    cell_ratio: float = 1.3
+    speed_margin: float = 0.1
+    max_steer: float = 0.3
+    solver: str = "CLARABEL"
+    tol: float = 1e-7
+
+    _positive: ClassVar[tuple[str, ...]] = ("camera_force_error", "imu_force_error", "tol")
+    _non_negative: ClassVar[tuple[str, ...]] = ("camera_decay_rate", "imu_decay_rate", "state_weight", "speed_margin", "max_steer")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not self.cell_ratio > 1.0:
+            raise ParameterError(f"GainDesign.cell_ratio must be > 1, got {self.cell_ratio!r}")
+        if self.solver not in ("CLARABEL", "SCS"):
+            raise ParameterError(f"GainDesign.solver must be 'CLARABEL' or 'SCS', got {self.solver!r}")
 
 
-def discretize(vehicle: VehicleParams, dt: float, vx: float | None = None) -> Discretization:
-    """``x+ = Ad x + Bd [delta, psi_dot_des, psi_ddot_des] + Fd f`` with inputs held over ``dt`` (ZOH)."""
-    if not dt > 0:
-        raise ParameterError(f"dt must be > 0, got {dt!r}")
-    A, B1, B2, B3, F, _ = error_state_matrices(vehicle, vx)
-    B = np.column_stack([B1, B2, B3, F])
-    M = np.zeros((9, 9))
-    M[:4, :4] = A
-    M[:4, 4:] = B
-    E = sla.expm(M * dt)
-    return Discretization(dt, E[:4, :4], E[:4, 4:7], E[:4, 7:9])
+@dataclass
+class GroupCertificate:
+    """The certificate of one channel group's gains."""
+
+    group: str
+    period: float
+    P: NDArray
+    decay_rate: float
+    vertex_decay_rate: float
+    cost: float
+    max_vertex_eig: float
+    dense_points: int
+    dense_contraction: float
+    certified: bool
+    n_vertices: int
+    solve_s: float
+
+    def to_dict(self) -> dict:
+        return {
+            "group": self.group,
+            "period_s": self.period,
+            "certified": bool(self.certified),
+            "decay_rate_certified": float(self.decay_rate),
+            "decay_rate_at_vertices": float(self.vertex_decay_rate),
+            "h2_cost": float(self.cost),
+            "max_vertex_eig": float(self.max_vertex_eig),
+            "n_vertices": int(self.n_vertices),
+            "dense_check_points": int(self.dense_points),
+            "dense_check_worst_contraction": float(self.dense_contraction),
+            "solve_s": round(self.solve_s, 4),
+        }
 
 
 @dataclass
 class ObserverGains:
-    """Certified correction gain for frames every ``frame_period`` seconds.
+    """Certified gains per speed cell for the channel groups of a measurement model.
 
     Attributes
     ----------
-    L : ndarray, shape (4, 2)
-        Frame correction gain, ``x+ = x- + L (z - C x-)`` (SI units).
-    P : ndarray, shape (4, 4)
-        Lyapunov matrix in the scaled coordinates ``x = diag(STATE_SCALE) x_s``.
-    frame_period : float
-        ``T`` [s].
-    decay_rate : float
-        Certified decay rate ``alpha`` [1/s] of the state error (exact weights).
-    cost : float
-        Certified performance bound, inputs normalised (force error in units of
-        ``force_error_scale`` [N], noise in units of the camera noise std), outputs the
-        slip error [mrad] and the scaled states: the L2 gain (``hinf``) or the RMS bound
-        ``sqrt(trace Z)`` for unit white inputs (``h2``).
-    max_vertex_eig : float
-        Largest eigenvalue of ``-LMI`` over all vertices (certificate: ``<= tol``).
-    certified : bool
-        ``True`` when the numpy certificate holds.
-    vertices : ndarray, shape (V, 2)
-        Slopes ``(d_f, d_r)`` [N/rad] at the vertices.
-    solve_s : float
-        Wall time of the cvxpy solve [s] (0 on a cache hit).
+    edges : ndarray (n_cells + 1,)
+        Speed cell edges [m/s].
+    L_cam, L_imu : ndarray (n_cells, nx, 2)
+        Correction gains of the camera / IMU channels (zeros for a group not used), SI:
+        ``x += L [z - h(x)]``.
+    slope_box : ndarray (2, 2)
+        Certified total axle slopes ``[[k_f_lo, k_f_hi], [k_r_lo, k_r_hi]]`` [N/rad].
+    certificates : list of GroupCertificate
     """
 
-    L: NDArray
-    P: NDArray
-    frame_period: float
-    decay_rate: float
-    cost: float
-    max_vertex_eig: float
-    certified: bool
-    vertices: NDArray
-    solve_s: float
-    tolerance: float
+    model: MeasurementModel
+    edges: NDArray
+    L_cam: NDArray
+    L_imu: NDArray
+    slope_box: NDArray
+    certificates: list
     cache_hit: bool = False
     settings: dict = field(default_factory=dict)
+
+    @property
+    def certified(self) -> bool:
+        return all(c.certified for c in self.certificates)
+
+    @property
+    def decay_rate(self) -> float:
+        """Slowest certified decay rate over the groups [1/s]."""
+        return min(c.decay_rate for c in self.certificates)
+
+    @property
+    def frame_period(self) -> float:
+        return self.certificates[-1].period
+
+    @property
+    def solve_s(self) -> float:
+        return sum(c.solve_s for c in self.certificates)
+
+    @property
+    def n_cells(self) -> int:
+        return len(self.edges) - 1
+
+    @property
+    def speed_range(self) -> tuple[float, float]:
+        return float(self.edges[0]), float(self.edges[-1])
+
+    def cell_index(self, vx) -> NDArray:
+        """Cell of each speed (speeds outside the range use the nearest cell)."""
+        idx = np.searchsorted(self.edges, np.asarray(vx, dtype=float), side="right") - 1
+        return np.clip(idx, 0, self.n_cells - 1)
 
     def summary(self) -> dict:
         """The ``lmi`` block of ``metrics.json``."""
         return {
-            "solve_s": round(self.solve_s, 4),
+            "what": "robust-H2 vertex LMIs with a common Lyapunov matrix per channel group, speed-scheduled "
+            "gains, numpy re-check at the vertices and on a dense grid of slopes and speeds",
+            "sensors": self.model.name,
             "certified": bool(self.certified),
-            "max_vertex_eig": float(self.max_vertex_eig),
-            "tolerance": self.tolerance,
             "decay_rate": float(self.decay_rate),
-            "objective": self.settings.get("objective"),
-            "cost": float(self.cost),
-            "frame_period_s": self.frame_period,
-            "n_vertices": int(len(self.vertices)),
+            "speed_range_mps": list(self.speed_range),
+            "n_cells": self.n_cells,
+            "slope_box_N_per_rad": {"front": self.slope_box[0].tolist(), "rear": self.slope_box[1].tolist()},
+            "groups": [c.to_dict() for c in self.certificates],
+            "noise_std_designed": self.settings.get("noise_std"),
+            "force_error_N": self.settings.get("force_error_N"),
             "cache_hit": self.cache_hit,
+            "solve_s": round(self.solve_s, 4),
+            "max_vertex_eig": max(c.max_vertex_eig for c in self.certificates),
+            "frame_period_s": self.frame_period,
         }
 
 
-def default_cache_dir() -> Path:
-    """``$TIRE_LEARNING_CACHE`` or ``~/.cache/tire_learning_env``."""
-    return Path(os.environ.get("TIRE_LEARNING_CACHE", Path.home() / ".cache" / "tire_learning_env")) / "gains"
+def speed_cells(speed_range: tuple[float, float], ratio: float) -> NDArray:
+    """Geometric cell edges over ``speed_range`` [m/s] with at most ``ratio`` per cell."""
+    lo, hi = (float(v) for v in speed_range)
+    if not (0 < lo < hi):
+        raise ParameterError(f"speed range must be 0 < lo < hi [m/s], got {speed_range!r}")
+    n = max(1, int(math.ceil(math.log(hi / lo) / math.log(ratio) - 1e-9)))
+    return np.geomspace(lo, hi, n + 1)
 
 
-def _problem_data(
-    vehicle: VehicleParams,
-    slope_box: NDArray,
-    frame_period: float,
-    noise_std: NDArray,
-    force_error_scale: float,
-    state_weight: float,
-):
-    """Scaled vertex matrices: ``(A_v list, Bw_f, C_s, H_s, vertices)``."""
-    disc = discretize(vehicle, frame_period)
-    S = np.diag(STATE_SCALE)
-    Sinv = np.diag(1.0 / STATE_SCALE)
-    _, _, _, _, _, C = error_state_matrices(vehicle)
-    H = slip_jacobian(vehicle)
-    vertices = np.array(list(itertools.product(slope_box[0], slope_box[1])))
-    A_list = [Sinv @ (disc.Ad + disc.Fd @ np.diag(v) @ H) @ S for v in vertices]
-    Bf = Sinv @ disc.Fd * force_error_scale  # force error input, unit = force_error_scale [N]
-    Cs = np.diag(1.0 / noise_std) @ C @ S  # measurement in units of the noise std
-    # performance output: slip error in mrad and every state error in units of STATE_SCALE,
-    # so no channel is "free" (a free e1 channel gives deadbeat e1 corrections that wipe the
-    # sensitivity Upsilon and with it the learning)
-    Hs = np.vstack([H @ S / SLIP_SCALE, state_weight * np.eye(4)])
-    return A_list, Bf, Cs, Hs, vertices
+# -- vertex data ------------------------------------------------------------------------------
+def _zoh(A: NDArray, F: NDArray, T: float) -> tuple[NDArray, NDArray]:
+    n, m = F.shape
+    M = np.zeros((n + m, n + m))
+    M[:n, :n] = A
+    M[:n, n:] = F
+    E = sla.expm(M * T)
+    return E[:n, :n], E[:n, n:]
 
 
-def _vertex_matrix(P, Y, g, A, Bf, Cs, Hs, rho):
-    """The LMI matrix at one vertex (numpy or cvxpy expressions); must be >= 0.
+@dataclass
+class _Vertex:
+    A: NDArray  # prediction over the period
+    B: NDArray  # force-error input held over the period (SI, N)
+    W: NDArray  # other sensors' noise injected during the prediction (columns: unit white inputs)
+    C: NDArray  # group output
+    D: NDArray  # force-error feedthrough of the group output
+    Hs: NDArray  # performance output (scaled)
+    theta: tuple
 
-    Posterior error ``e+ = (I - L C)(A e + Bf d) - L v`` with ``Y = P L``: the blocks
-    ``P (I - L C) A = P A - Y C A`` etc. are affine in ``(P, Y, g)``.
-    """
-    n, m = A.shape[0], Cs.shape[0]
-    nd = Bf.shape[1]
-    PA = P @ A - Y @ Cs @ A
-    PB = P @ Bf - Y @ Cs @ Bf
-    PV = -Y
-    Z = lambda r, c: np.zeros((r, c))  # noqa: E731
-    if isinstance(P, np.ndarray):
-        blk = np.block
-        eye = np.eye
-        gI = g * eye(nd + m)
+
+def _imu_step(vehicle, model_nx, k_f, k_r, v, h):
+    """One IMU-period prediction and output at frozen slopes (nx rows)."""
+    A, F = linear_matrices(vehicle, v, k_f, k_r, model_nx)
+    Ad, Fd = _zoh(A, F, h)
+    C, D = measurement_model("both" if model_nx == 4 else "imu").imu_output(vehicle, v, k_f, k_r)
+    return Ad, Fd, C, D
+
+
+def _vertices(vehicle, model: MeasurementModel, group: str, T: float, imu_T: float | None, v: float,
+              box: NDArray, noise: NDArray, L_imu_cell: NDArray | None, state_weight: float) -> list[_Vertex]:  # fmt: skip
+    """The vertex maps of a group design at speed ``v``: four slope corners."""
+    nx = 2 if group == "imu" else model.nx  # the IMU group acts on the body states only
+    S = STATE_SCALE[:nx]
+    Hslip = slip_jacobian(vehicle, v, nx)
+    Hs = np.vstack([Hslip * S / SLIP_SCALE, state_weight * np.eye(nx)])
+    out = []
+    for k_f, k_r in itertools.product(box[0], box[1]):
+        A, F = linear_matrices(vehicle, v, k_f, k_r, nx)
+        W = np.zeros((nx, 0))
+        if group == "imu":
+            Ad, Bd = _zoh(A, F, T)
+            C, D = measurement_model("imu").imu_output(vehicle, v, k_f, k_r)
+        elif model.uses_imu:  # fused: camera frames, IMU corrections in between
+            m_steps = max(1, int(round(T / imu_T)))
+            h = T / m_steps
+            Ah, Fh, Ci, Di = _imu_step(vehicle, nx, k_f, k_r, v, h)
+            Li = np.zeros((nx, 2))
+            Li[:2] = L_imu_cell
+            Ad = np.eye(nx)
+            Bd = np.zeros((nx, 2))
+            cov = np.zeros((nx, nx))
+            for _ in range(m_steps):
+                M = np.eye(nx) - Li @ Ci
+                Ad = M @ Ah @ Ad
+                Bd = M @ (Ah @ Bd + Fh) - Li @ Di
+                cov = M @ Ah @ cov @ Ah.T @ M.T + Li @ np.diag(noise[2:] ** 2) @ Li.T
+            lam, vec = np.linalg.eigh(0.5 * (cov + cov.T))
+            W = vec * np.sqrt(np.maximum(lam, 0.0))  # W W^T = cov
+            C = model.camera_output()
+            D = np.zeros((2, 2))
+        else:
+            Ad, Bd = _zoh(A, F, T)
+            C = model.camera_output()
+            D = np.zeros((2, 2))
+        out.append(_Vertex(Ad, Bd, W, C, D, Hs, (k_f, k_r, v)))
+    return out
+
+
+def _scaled(vx: _Vertex, S, noise_group, fes):
+    Si = np.diag(1.0 / S)
+    Sm = np.diag(S)
+    Ni = np.diag(1.0 / noise_group)
+    A = Si @ vx.A @ Sm
+    B = Si @ vx.B * fes
+    W = Si @ vx.W
+    C = Ni @ vx.C @ Sm
+    D = Ni @ vx.D * fes
+    return A, B, W, C, D, vx.Hs
+
+
+def _lmis(P, Ys, Zs, cells, rho):
+    """``(per_vertex[c][v] pairs)``: the two matrices per vertex that must be >= 0 (numpy or cvxpy)."""
+    numeric = isinstance(P, np.ndarray)
+    if numeric:
+        bmat, hstack = np.block, np.hstack
     else:
         import cvxpy as cp
 
-        blk = cp.bmat
-        eye = np.eye
-        gI = g * eye(nd + m)
-    rows = [
-        [rho**2 * P, Z(n, nd + m), PA.T, Hs.T],
-        [Z(nd + m, n), gI, _hstack(PB, PV).T, Z(nd + m, Hs.shape[0])],
-        [PA, _hstack(PB, PV), P, Z(n, Hs.shape[0])],
-        [Hs, Z(Hs.shape[0], nd + m), Z(Hs.shape[0], n), eye(Hs.shape[0])],
-    ]
-    return blk(rows)
+        bmat, hstack = cp.bmat, cp.hstack
+    out = []
+    for verts, Y, Z in zip(cells, Ys, Zs):
+        rows = []
+        for A, B, W, C, D, Hs in verts:
+            PA = P @ A - Y @ C @ A
+            parts = [P @ B - Y @ C @ B]
+            if W.shape[1]:
+                parts.append(P @ W - Y @ C @ W)
+            if np.any(D):
+                parts.append(-(Y @ D))
+            parts.append(-Y)
+            PBw = hstack(parts)
+            M1 = bmat([[rho**2 * P - Hs.T @ Hs, PA.T], [PA, P]])
+            M2 = bmat([[Z, PBw.T], [PBw, P]])
+            rows.append((M1, M2))
+        out.append(rows)
+    return out
 
 
-def _h2_matrices(P, Y, Z, A, Bf, Cs, Hs, rho):
-    """Robust H2 (guaranteed-cost) LMIs at one vertex, both must be >= 0.
-
-    ``[[rho^2 P - Hs^T Hs, A_cl^T P], [P A_cl, P]]`` (decay ``rho`` and the observability
-    Gramian bound ``P >= A_cl^T P A_cl + Hs^T Hs``) and ``[[Z, Bw^T P], [P Bw, P]]``
-    (``Z >= Bw^T P Bw``), with ``P A_cl = P A - Y Cs A`` and ``P Bw = [P Bf - Y Cs Bf, -Y]``.
-    Then the steady-state mean-square weighted error for unit white force error and noise
-    is at most ``trace(Z)``.
-    """
-    PA = P @ A - Y @ Cs @ A
-    PBw = _hstack(P @ Bf - Y @ Cs @ Bf, -Y)
-    if isinstance(P, np.ndarray):
-        M1 = np.block([[rho**2 * P - Hs.T @ Hs, PA.T], [PA, P]])
-        M2 = np.block([[Z, PBw.T], [PBw, P]])
-    else:
-        import cvxpy as cp
-
-        M1 = cp.bmat([[rho**2 * P - Hs.T @ Hs, PA.T], [PA, P]])
-        M2 = cp.bmat([[Z, PBw.T], [PBw, P]])
-    return M1, M2
+def _n_inputs(verts) -> int:
+    A, B, W, C, D, Hs = verts[0]
+    return B.shape[1] + W.shape[1] + (D.shape[1] if np.any(D) else 0) + C.shape[0]
 
 
-def _hstack(a, b):
-    if isinstance(a, np.ndarray) and isinstance(b, np.ndarray):
-        return np.hstack([a, b])
-    import cvxpy as cp
-
-    return cp.hstack([a, b])
+def _worst(M: NDArray) -> float:
+    M = 0.5 * (M + M.T)
+    return float(np.linalg.eigvalsh(-M).max() / max(1.0, np.abs(M).max()))
 
 
-def _lmi_matrices(objective, P, Y, aux, A_list, Bf, Cs, Hs, rho):
-    """All matrices that must be >= 0: one per vertex (+ the cost block for ``h2``).
-
-    ``aux`` is the squared L2 gain ``g`` (``hinf``) or the cost matrix ``Z`` (``h2``).
-    Returns ``(per_vertex, extra)``.
-    """
-    if objective == "hinf":
-        return [_vertex_matrix(P, Y, aux, A, Bf, Cs, Hs, rho) for A in A_list], []
-    per_vertex, extra = [], []
-    for A in A_list:
-        M1, M2 = _h2_matrices(P, Y, aux, A, Bf, Cs, Hs, rho)
-        per_vertex.append(M1)
-        extra = [M2]
-    return per_vertex, extra
+def _contraction(A, C, Ls, P) -> float:
+    Acl = A - Ls @ C @ A
+    return float(np.sqrt(max(sla.eigh(Acl.T @ P @ Acl, P, eigvals_only=True).max(), 0.0)))
 
 
-def certify(
-    objective: str,
-    Ls: NDArray,
-    P: NDArray,
-    aux,
-    A_list: list[NDArray],
-    Bf: NDArray,
-    Cs: NDArray,
-    Hs: NDArray,
-    rho: float,
-    frame_period: float,
-    tol: float,
-) -> tuple[bool, float, float, NDArray]:
-    """Independent numpy check of a solution, in the scaled coordinates of the solve.
-
-    Returns ``(certified, max_vertex_eig, decay_rate, per_vertex_eig)``:
-    ``per_vertex_eig[v]`` is the largest eigenvalue of ``-LMI_v`` (``<= tol`` required,
-    relative to the largest entry of ``LMI_v``; the ``h2`` cost block counts for every
-    vertex), and ``decay_rate = -ln(max_v rho_v)/T`` with ``rho_v^2`` the largest
-    generalised eigenvalue of ``(A_cl,v^T P A_cl,v, P)``, ``A_cl,v = (I - L C) A_v``:
-    the decay rate the certificate actually proves.
-    """
+def _certify(P, Ls, Zs, cells, rho, tol):
+    """Numpy check at the vertices: ``(ok, max_vertex_eig, worst_contraction, per_vertex_eig)``."""
     P = 0.5 * (P + P.T)
-    eig_P = np.linalg.eigvalsh(P)
-    Y = P @ Ls
-    per_vertex_M, extra = _lmi_matrices(objective, P, Y, aux, A_list, Bf, Cs, Hs, rho)
-
-    def worst(M):
-        M = 0.5 * (M + M.T)
-        return float(np.linalg.eigvalsh(-M).max() / max(1.0, np.abs(M).max()))
-
-    extra_worst = max((worst(M) for M in extra), default=-np.inf)
-    per_vertex = np.array([max(worst(M), extra_worst) for M in per_vertex_M])
-    rhos = []
-    for A in A_list:
-        Acl = A - Ls @ Cs @ A
-        rhos.append(float(np.sqrt(max(sla.eigh(Acl.T @ P @ Acl, P, eigvals_only=True).max(), 0.0))))
-    rho_max = max(rhos)
-    decay = -np.log(rho_max) / frame_period if rho_max > 0 else np.inf
-    ok = bool(eig_P.min() > 0 and per_vertex.max() <= tol and rho_max < 1.0)
-    return ok, float(per_vertex.max()), float(decay), per_vertex
+    Ys = [P @ L for L in Ls]
+    mats = _lmis(P, Ys, Zs, cells, rho)
+    eig = np.array([[max(_worst(M1), _worst(M2)) for M1, M2 in rows] for rows in mats])
+    worst_rho = max(_contraction(A, C, L, P) for verts, L in zip(cells, Ls) for A, B, W, C, D, Hs in verts)
+    ok = bool(np.linalg.eigvalsh(P).min() > 0 and eig.max() <= tol and worst_rho < 1.0)
+    return ok, float(eig.max()), worst_rho, eig
 
 
-def _cache_key(payload: dict) -> str:
-    text = json.dumps(payload, sort_keys=True, default=lambda o: np.asarray(o).round(12).tolist())
-    return hashlib.sha256(text.encode()).hexdigest()[:24]
-
-
-def _variables(objective, n, m, nw):
+def _solve(cells, rho, solver, margin, nx):
     import cvxpy as cp
 
-    P = cp.Variable((n, n), symmetric=True)
-    Y = cp.Variable((n, m))
-    aux = cp.Variable(nonneg=True) if objective == "hinf" else cp.Variable((nw, nw), symmetric=True)
-    cost = aux if objective == "hinf" else cp.trace(aux)
-    return P, Y, aux, cost
-
-
-def _solve(objective, A_list, Bf, Cs, Hs, rho, solver, margin):
-    """cvxpy: minimise the cost subject to every LMI >= margin I and P >= margin I."""
-    import cvxpy as cp
-
-    n, m = 4, Cs.shape[0]
-    P, Y, aux, cost = _variables(objective, n, m, Bf.shape[1] + m)
-    per_vertex, extra = _lmi_matrices(objective, P, Y, aux, A_list, Bf, Cs, Hs, rho)
-    cons = [P >> margin * np.eye(n)]
-    cons += [0.5 * (M + M.T) >> margin * np.eye(M.shape[0]) for M in per_vertex + extra]
-    prob = cp.Problem(cp.Minimize(cost), cons)
+    P = cp.Variable((nx, nx), symmetric=True)
+    Ys = [cp.Variable((nx, 2)) for _ in cells]
+    Zs = [cp.Variable((_n_inputs(v), _n_inputs(v)), symmetric=True) for v in cells]
+    t = cp.Variable()
+    mats = _lmis(P, Ys, Zs, cells, rho)
+    cons = [P >> margin * np.eye(nx)]
+    for rows, Z in zip(mats, Zs):
+        for M1, M2 in rows:
+            cons += [0.5 * (M1 + M1.T) >> margin * np.eye(M1.shape[0]), 0.5 * (M2 + M2.T) >> margin * np.eye(M2.shape[0])]
+        cons.append(cp.trace(Z) <= t)
+    prob = cp.Problem(cp.Minimize(t), cons)
     try:
         prob.solve(solver=solver)
     except cp.error.SolverError:
         return "solver_error", None, None, None
-    aux_value = None if aux.value is None else np.asarray(aux.value, dtype=float)
-    return prob.status, P.value, Y.value, aux_value
+    if P.value is None or any(Y.value is None for Y in Ys):
+        return prob.status, None, None, None
+    return prob.status, P.value, [Y.value for Y in Ys], [np.asarray(Z.value) for Z in Zs]
 
 
-def _diagnose(objective, A_list, Bf, Cs, Hs, rho, solver, vertices, frame_period, decay_rate) -> str:
-    """Smallest slack ``t`` with ``LMI_v + t I >= 0`` at all vertices, and the binding vertices."""
+def _diagnose(cells, thetas, rho, solver, nx, edges) -> str:
+    """Smallest slack ``s`` with ``LMI + s I >= 0`` everywhere, and the binding vertices."""
     import cvxpy as cp
 
-    n, m = 4, Cs.shape[0]
-    P, Y, aux, cost = _variables(objective, n, m, Bf.shape[1] + m)
-    t = cp.Variable()
-    per_vertex, extra = _lmi_matrices(objective, P, Y, aux, A_list, Bf, Cs, Hs, rho)
-    cons = [P >> np.eye(n), cp.trace(P) <= 1e6, cost <= 1e8]
-    lmis = [0.5 * (M + M.T) + t * np.eye(M.shape[0]) >> 0 for M in per_vertex]
-    extra_c = [0.5 * (M + M.T) + t * np.eye(M.shape[0]) >> 0 for M in extra]
-    prob = cp.Problem(cp.Minimize(t), cons + lmis + extra_c)
-    for name in dict.fromkeys((solver, "SCS")):  # SCS as a robust fallback for the diagnosis
+    P = cp.Variable((nx, nx), symmetric=True)
+    Ys = [cp.Variable((nx, 2)) for _ in cells]
+    Zs = [cp.Variable((_n_inputs(v), _n_inputs(v)), symmetric=True) for v in cells]
+    slack = cp.Variable()
+    mats = _lmis(P, Ys, Zs, cells, rho)
+    cons = [P >> np.eye(nx), cp.trace(P) <= 1e6]
+    vcons = []
+    for rows, Z in zip(mats, Zs):
+        for M1, M2 in rows:
+            vcons.append(0.5 * (M1 + M1.T) + slack * np.eye(M1.shape[0]) >> 0)
+            cons.append(0.5 * (M2 + M2.T) + slack * np.eye(M2.shape[0]) >> 0)
+        cons.append(cp.trace(Z) <= 1e8)
+    prob = cp.Problem(cp.Minimize(slack), cons + vcons)
+    for name in dict.fromkeys((solver, "SCS")):
         try:
             prob.solve(solver=name)
         except cp.error.SolverError:
             continue
-        if t.value is not None:
+        if slack.value is not None:
             break
-    if t.value is None:
+    if slack.value is None:
         return f"the diagnostic solve failed too (status {prob.status})"
     parts = []
-    for k, (c, v) in enumerate(zip(lmis, vertices)):
+    flat = [th for ths in thetas for th in ths]
+    for c, th in zip(vcons, flat):
         dual = c.dual_value
-        weight = float(np.trace(dual)) if dual is not None else float("nan")
-        if weight > 1e-6:
-            parts.append(f"vertex {k} (d_f={v[0]:.4g}, d_r={v[1]:.4g} N/rad, dual weight {weight:.3g})")
+        if dual is not None and float(np.trace(dual)) > 1e-3:
+            parts.append(f"k_f={th[0]:.4g}, k_r={th[1]:.4g} N/rad at vx={th[2]:.3g} m/s")
     return (
-        f"with decay {decay_rate} 1/s over frames of {frame_period} s the LMI can at best hold as "
-        f"LMI_v >= -{float(t.value):.3g} I (it needs >= 0); binding: " + ("; ".join(parts) or "none identified")
+        f"speed cells {np.round(edges, 2).tolist()} m/s: the LMIs can at best hold as LMI >= -{float(slack.value):.3g} I "
+        "(they need >= 0); binding: " + ("; ".join(parts[:6]) or "none identified")
+        + (f" (+{len(parts) - 6} more)" if len(parts) > 6 else "")
     )
+
+
+def _dense_contraction(vehicle, model, group, T, imu_T, edges, box, noise, L_imu_si, Ls_scaled, P, state_weight, n=4):
+    """Worst contraction of ``e^T P e`` on a dense grid of slopes and speeds (exact frozen maps)."""
+    worst, count = 0.0, 0
+    nxg = 2 if group == "imu" else model.nx
+    S = STATE_SCALE[:nxg]
+    noise_g = noise[:2] if group == "camera" else noise[2:]
+    for c, (va, vb) in enumerate(zip(edges[:-1], edges[1:])):
+        for v in np.geomspace(va, vb, n):
+            for kf in np.linspace(*box[0], n):
+                for kr in np.linspace(*box[1], n):
+                    sub = np.array([[kf, kf], [kr, kr]])
+                    vx = _vertices(vehicle, model, group, T, imu_T, v, sub, noise,
+                                   None if L_imu_si is None else L_imu_si[c], state_weight)[0]  # fmt: skip
+                    A, B, W, C, D, Hs = _scaled(vx, S, noise_g, 1.0)
+                    worst = max(worst, _contraction(A, C, Ls_scaled[c], P))
+                    count += 1
+    return worst, count
+
+
+def _design_group(vehicle, model, group, T, imu_T, edges, box, noise, fes, decay, design, L_imu_si, cache_root, settings):
+    """Solve, certify (vertices + dense grid) and return ``(L_si (n_cells, nx_g, 2), certificate, hit)``."""
+    nxg = 2 if group == "imu" else model.nx
+    S = STATE_SCALE[:nxg]
+    noise_g = noise[:2] if group == "camera" else noise[2:]
+    rho = float(math.exp(-decay * T))
+    cells, thetas = [], []
+    for c, (va, vb) in enumerate(zip(edges[:-1], edges[1:])):
+        verts, ths = [], []
+        for v in (va, math.sqrt(va * vb), vb):
+            for vx in _vertices(vehicle, model, group, T, imu_T, v, box, noise,
+                                None if L_imu_si is None else L_imu_si[c], design.state_weight):  # fmt: skip
+                verts.append(_scaled(vx, S, noise_g, fes))
+                ths.append(vx.theta)
+        cells.append(verts)
+        thetas.append(ths)
+    key = dict(settings, group=group, version=_VERSION)
+    cache_file = None
+    hit = False
+    P = Ls = Zs = None
+    solve_s = 0.0
+    if cache_root is not None:
+        text = json.dumps(key, sort_keys=True, default=lambda o: np.asarray(o).round(12).tolist())
+        cache_file = Path(cache_root) / f"gains_{hashlib.sha256(text.encode()).hexdigest()[:24]}.json"
+        if cache_file.exists():
+            try:
+                data = json.loads(cache_file.read_text())
+                P = np.array(data["P"], dtype=float)
+                Ls = [np.array(L, dtype=float) for L in data["Ls"]]
+                Zs = [np.array(Z, dtype=float) for Z in data["Zs"]]
+                if P.shape != (nxg, nxg) or len(Ls) != len(cells):
+                    raise ValueError("shape mismatch")
+                hit = _certify(P, Ls, Zs, cells, rho, design.tol)[0]
+            except (OSError, ValueError, KeyError, TypeError):
+                hit = False  # a corrupt or stale cache file: solve again and overwrite it
+    if not hit:
+        t0 = time.perf_counter()
+        status, P, Ys, Zs = _solve(cells, rho, design.solver, 1e-7, nxg)
+        solve_s = time.perf_counter() - t0
+        if P is None or status not in ("optimal", "optimal_inaccurate"):
+            why = _diagnose(cells, thetas, rho, design.solver, nxg, edges)
+            raise InfeasibleLMIError(f"{group} gain LMIs infeasible (solver status {status!r}) for decay {decay} 1/s "
+                                     f"over periods of {T:.4g} s: {why}")  # fmt: skip
+        P = 0.5 * (P + P.T)
+        Ls = [np.linalg.solve(P, Y) for Y in Ys]
+        Zs = [Z * (1.0 + 1e-6) + 1e-9 * np.eye(Z.shape[0]) for Z in Zs]
+    ok, worst_eig, worst_rho, eig = _certify(P, Ls, Zs, cells, rho, design.tol)
+    if not ok:
+        c, v = np.unravel_index(int(np.argmax(eig)), eig.shape)
+        th = thetas[c][v]
+        raise InfeasibleLMIError(
+            f"{group} gains: the numpy certificate fails at k_f={th[0]:.4g}, k_r={th[1]:.4g} N/rad, vx={th[2]:.3g} "
+            f"m/s: largest eigenvalue of -LMI {eig[c, v]:.3g} > tol {design.tol:g} (worst contraction {worst_rho:.6f})"
+        )
+    if cache_file is not None and not hit:
+        from ..io import atomic_write_json
+
+        atomic_write_json(cache_file, {"P": P, "Ls": Ls, "Zs": Zs, "settings": key})
+    dense_rho, points = _dense_contraction(vehicle, model, group, T, imu_T, edges, box, noise, L_imu_si, Ls, P,
+                                           design.state_weight)  # fmt: skip
+    rho_all = max(worst_rho, dense_rho)
+    cert = GroupCertificate(
+        group=group, period=T, P=P, decay_rate=float(-math.log(rho_all) / T) if rho_all < 1 else 0.0,
+        vertex_decay_rate=float(-math.log(worst_rho) / T), cost=float(np.sqrt(max(np.trace(Z) for Z in Zs))),
+        max_vertex_eig=worst_eig, dense_points=points, dense_contraction=dense_rho, certified=bool(ok and dense_rho < 1.0),
+        n_vertices=sum(len(v) for v in cells), solve_s=solve_s,
+    )  # fmt: skip
+    L_si = np.array([np.diag(S) @ L @ np.diag(1.0 / noise_g) for L in Ls])
+    return L_si, cert, hit
 
 
 def synthesize_gains(
     vehicle: VehicleParams,
-    basis: SoftClipBasis,
+    model: str | MeasurementModel,
     frame_period: float,
-    decay_rate: float = 1.0,
-    noise_std: tuple[float, float] | None = None,
-    force_error_scale: float = 100.0,
-    slope_bounds: NDArray | None = None,
-    state_weight: float = 1.0,
-    objective: str = "h2",
-    solver: str = "CLARABEL",
-    tol: float = 1e-7,
-    margin: float = 1e-6,
+    noise_std: NDArray,
+    speed_range: tuple[float, float],
+    slope_box: NDArray,
+    design: GainDesign | None = None,
+    imu_period: float | None = None,
     cache: bool | str | Path = True,
 ) -> ObserverGains:
-    """Solve the vertex LMIs for the frame gain ``L`` and certify the result.
+    """Solve and certify the gains of every channel group of ``model``.
 
     Parameters
     ----------
     vehicle : VehicleParams
-        Nominal vehicle (the model the observer uses).
-    basis : SoftClipBasis
-        Supplies the slope box ``[d_lo, d_hi]`` per axle (with ``W_max``).
+        Nominal vehicle (``m, Iz, lf, lr``; ``Cf``, ``Cr`` only through ``slope_box``).
+    model : {"camera", "imu", "both"} or MeasurementModel
     frame_period : float
-        Camera frame period ``T`` [s] (1e-3 for the paper's 1 kHz camera).
-    decay_rate : float
-        Required decay rate ``alpha`` [1/s] (the paper asks 2; 1 filters a noisy 20 Hz
-        camera better, and the certified rate reported is usually higher).
-    noise_std : tuple of float, optional
-        Camera noise std ``(e1 [m], e2 [rad])``; floored at the resolution
-        :data:`NOISE_FLOOR`. It sets the noise/bandwidth trade-off.
-    force_error_scale : float
-        Size of the force error the gain should reject [N].
-    slope_bounds : ndarray (2, 2), optional
-        Override of the slope box ``[[lo_f, hi_f], [lo_r, hi_r]]`` [N/rad].
-    state_weight : float
-        Weight of the state errors (in units of :data:`STATE_SCALE`) beside the slip
-        error (mrad) in the performance output.
-    objective : {"h2", "hinf"}
-        ``h2`` (default): minimise a guaranteed bound on the mean-square error due to
-        white force error and camera noise (a robust Kalman-like gain; filters noise).
-        ``hinf``: minimise the worst-case L2 gain (more aggressive, noise-sensitive).
-    solver : {"CLARABEL", "SCS"}
-        cvxpy SDP solver.
-    tol : float
-        Certificate tolerance on the largest eigenvalue of ``-LMI`` (relative).
-    margin : float
-        Strictness imposed in the solve (``LMI >= margin I``).
+        Camera frame period [s] (camera, both) or IMU sample period [s] (imu).
+    noise_std : array (4,)
+        Noise std of ``e1`` [m], ``e2`` [rad], ``a_y`` [m/s^2], ``r`` [rad/s] the gains filter
+        (floored by the caller).
+    speed_range : (float, float)
+        Speeds [m/s] to certify (widened by ``design.speed_margin``).
+    slope_box : array (2, 2)
+        Total axle slopes ``[[k_f_lo, k_f_hi], [k_r_lo, k_r_hi]]`` [N/rad] the learned curves can
+        take (the front lower bound is multiplied by ``cos(max_steer)`` here).
+    design : GainDesign, optional
+    imu_period : float, optional
+        IMU sample period [s] (fused estimation).
     cache : bool or path
         Disk cache (default :func:`default_cache_dir`); ``False`` disables it.
-
-    Returns
-    -------
-    ObserverGains
 
     Raises
     ------
     InfeasibleLMIError
-        No gain satisfies the LMIs, or the solution fails the certificate.
+        No gains satisfy the LMIs, or a solution fails the numpy certificate (the message
+        names the binding vertices).
     """
+    model = measurement_model(model)
+    design = design or GainDesign()
     if not frame_period > 0:
-        raise ParameterError(f"frame_period must be > 0, got {frame_period!r}")
-    if not decay_rate >= 0:
-        raise ParameterError(f"decay_rate must be >= 0, got {decay_rate!r}")
-    if objective not in ("h2", "hinf"):
-        raise ParameterError(f"objective must be 'h2' or 'hinf', got {objective!r}")
-    noise = np.maximum(np.zeros(2) if noise_std is None else np.asarray(noise_std, dtype=float), NOISE_FLOOR)
-    box = np.asarray(basis.force_slope_bounds() if slope_bounds is None else slope_bounds, dtype=float)
-    if box.shape != (2, 2) or np.any(box[:, 0] > box[:, 1]):
-        raise ParameterError(f"slope_bounds must be [[lo_f, hi_f], [lo_r, hi_r]] with lo <= hi, got {box.tolist()}")
-    rho = float(np.exp(-decay_rate * frame_period))
-    A_list, Bf, Cs, Hs, vertices = _problem_data(vehicle, box, frame_period, noise, force_error_scale, state_weight)
+        raise ParameterError(f"frame_period must be > 0 s, got {frame_period!r}")
+    noise = np.asarray(noise_std, dtype=float).reshape(4)
+    if not np.all(noise > 0):
+        raise ParameterError(f"noise_std must be 4 positive values (e1, e2, a_y, r), got {noise_std!r}")
+    box = np.array(slope_box, dtype=float).reshape(2, 2)
+    if np.any(box[:, 0] <= 0) or np.any(box[:, 0] >= box[:, 1]):
+        raise ParameterError(f"slope_box must hold 0 < lo < hi per axle [N/rad], got {box.tolist()}")
+    box[0, 0] *= math.cos(design.max_steer)
+    lo, hi = (float(v) for v in speed_range)
+    lo = max(lo * (1.0 - design.speed_margin), 3.0)
+    hi = max(hi * (1.0 + design.speed_margin), lo * 1.05)
+    edges = speed_cells((lo, hi), design.cell_ratio)
+    axle_load = 0.5 * vehicle.m * 9.81
     settings = {
-        "version": _VERSION,
-        "vehicle": vehicle.to_dict(),
-        "slope_box": box.tolist(),
+        "vehicle": [vehicle.m, vehicle.Iz, vehicle.lf, vehicle.lr],
+        "model": model.name,
         "frame_period": frame_period,
-        "decay_rate": decay_rate,
+        "imu_period": imu_period,
         "noise_std": noise.tolist(),
-        "force_error_scale": force_error_scale,
-        "state_weight": state_weight,
-        "objective": objective,
-        "solver": solver,
-        "margin": margin,
-        "state_scale": STATE_SCALE.tolist(),
+        "edges": edges.tolist(),
+        "slope_box": box.tolist(),
+        "design": design.to_dict(),
     }
-    cache_file = None
+    cache_root = None
     if cache:
-        root = default_cache_dir() if cache is True else Path(cache)
-        cache_file = root / f"{_cache_key(settings)}.json"
-        if cache_file.exists():
-            data = json.loads(cache_file.read_text())
-            Ls, P, aux = np.array(data["Ls"]), np.array(data["P"]), np.array(data["aux"])
-            ok, worst, alpha, _ = certify(objective, Ls, P, aux, A_list, Bf, Cs, Hs, rho, frame_period, tol)
-            if ok:
-                return _gains(Ls, P, aux, noise, frame_period, alpha, worst, ok, vertices, 0.0, tol, True, settings)
-    t0 = time.perf_counter()
-    status, P, Y, aux = _solve(objective, A_list, Bf, Cs, Hs, rho, solver, margin)
-    solve_s = time.perf_counter() - t0
-    if P is None or Y is None or aux is None or status not in ("optimal", "optimal_inaccurate"):
-        why = _diagnose(objective, A_list, Bf, Cs, Hs, rho, solver, vertices, frame_period, decay_rate)
-        raise InfeasibleLMIError(f"gain LMI infeasible (solver status {status!r}): {why}")
-    P = 0.5 * (P + P.T)
-    Ls = np.linalg.solve(P, Y)
-    # certify the reported cost with a hair of slack
-    aux = aux * (1.0 + 1e-6) + (1e-9 if aux.ndim == 0 else 1e-9 * np.eye(aux.shape[0]))
-    ok, worst, alpha, per_vertex = certify(objective, Ls, P, aux, A_list, Bf, Cs, Hs, rho, frame_period, tol)
-    if not ok:
-        k = int(np.argmax(per_vertex))
-        raise InfeasibleLMIError(
-            f"solver status {status!r} but the numpy certificate fails: at vertex {k} "
-            f"(d_f={vertices[k][0]:.4g}, d_r={vertices[k][1]:.4g} N/rad) the largest eigenvalue of -LMI is "
-            f"{per_vertex[k]:.3g} > tol {tol:g}; min eig(P) = {np.linalg.eigvalsh(P).min():.3g}"
-        )
-    if cache_file is not None:
-        from ..io import atomic_write_json
-
-        atomic_write_json(cache_file, {"Ls": Ls, "P": P, "aux": aux, "settings": settings})
-    return _gains(Ls, P, aux, noise, frame_period, alpha, worst, ok, vertices, solve_s, tol, False, settings)
-
-
-def _gains(Ls, P, aux, noise, frame_period, alpha, worst, ok, vertices, solve_s, tol, hit, settings) -> ObserverGains:
-    L = np.diag(STATE_SCALE) @ Ls @ np.diag(1.0 / noise)  # back to SI: x+ = x- + L (z - C x-)
-    cost = float(np.sqrt(aux)) if np.ndim(aux) == 0 else float(np.sqrt(np.trace(aux)))
-    return ObserverGains(
-        L=L,
-        P=P,
-        frame_period=frame_period,
-        decay_rate=alpha,
-        cost=cost,
-        max_vertex_eig=worst,
-        certified=ok,
-        vertices=vertices,
-        solve_s=solve_s,
-        tolerance=tol,
-        cache_hit=hit,
-        settings=settings,
-    )
+        cache_root = default_cache_dir() if cache is True else Path(cache)
+    n_cells = len(edges) - 1
+    nx = model.nx
+    L_cam = np.zeros((n_cells, nx, 2))
+    L_imu = np.zeros((n_cells, nx, 2))
+    certs = []
+    hits = []
+    if model.uses_imu:
+        T_imu = frame_period if not model.uses_camera else float(imu_period or frame_period)
+        fes = design.imu_force_error * axle_load
+        L2, cert, hit = _design_group(vehicle, model, "imu", T_imu, None, edges, box, noise, fes, design.imu_decay_rate,
+                                      design, None, cache_root, dict(settings, force_error_N=fes))  # fmt: skip
+        L_imu[:, :2, :] = L2
+        certs.append(cert)
+        hits.append(hit)
+    if model.uses_camera:
+        fes = design.camera_force_error * axle_load
+        Lc, cert, hit = _design_group(vehicle, model, "camera", frame_period, imu_period, edges, box, noise, fes,
+                                      design.camera_decay_rate, design, L_imu[:, :2, :] if model.uses_imu else None,
+                                      cache_root, dict(settings, force_error_N=fes))  # fmt: skip
+        L_cam[:] = Lc
+        certs.append(cert)
+        hits.append(hit)
+    settings["force_error_N"] = {
+        "camera": design.camera_force_error * axle_load if model.uses_camera else None,
+        "imu": design.imu_force_error * axle_load if model.uses_imu else None,
+    }
+    return ObserverGains(model, edges, L_cam, L_imu, box, certs, all(hits), settings)

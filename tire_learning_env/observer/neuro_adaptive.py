@@ -1,356 +1,199 @@
 r"""The neuro-adaptive observer: states and neural tire-force weights estimated together.
 
-Model (SPEC §1-2): ``xi_dot = A xi + B1 delta + B2 psi_dot_des + B3 psi_ddot_des + F f``,
-``f_i = gamma_i sum_j W_ij sigma_ij(alpha_i)`` (eq. 9, 14), ``z = C xi`` (camera).
+One estimator for every sensor set: the measurement model (:mod:`.model`: lane camera
+``[e1, e2]``, IMU ``[a_y, r]``, or both) only decides which channels are read and which
+certified gains correct the state (:mod:`.gains`). Model, adaptation law, latency handling,
+health flag and uncertainty are the same (:mod:`._kernel`, which documents the equations).
 
-Discretisation: the model is integrated exactly over each physics tick ``dt`` with the
-inputs and the estimated force held (zero-order hold, :func:`.gains.discretize`), so
-the observer is stable at any rate; corrections happen only when a camera frame arrives
-(NaN rows are prediction-only), with the certified frame gain ``L`` of
-:func:`.gains.synthesize_gains`.
+Adaptation (the repaired eq. 15): with ``Upsilon = d x_hat / d w`` the sensitivity of the
+state estimate to the weights (Q. Zhang, IEEE TAC 47(3), 2002) and ``Psi = H Upsilon + D_w``
+the regressor of a measurement,
 
-Adaptation (the repaired eq. 15): with ``Upsilon = d xi_hat / d w`` the sensitivity of the
-state estimate to the weights (Zhang 2002),
+    w+ = Proj( w + K nu ),   K = P_w Psi^T (Psi P_w Psi^T + H Sigma H^T + R)^-1     (RLS)
+    x+ = x + Upsilon (w+ - w) + L nu,    Upsilon+ = Upsilon - L Psi
 
-    predict:  xi-  = Ad xi + Bd u + Fd Gamma Phi(alpha_hat) w,     Upsilon- = Ad Upsilon + Fd Gamma Phi
-    frame:    nu = z - C xi-,   Psi = C Upsilon-
-              w+ = Proj( w + K nu ),    K = P_w Psi^T (Psi P_w Psi^T + R)^-1   (recursive least squares)
-              xi+ = xi- + L nu + (I - L C) Upsilon- (w+ - w),   Upsilon+ = (I - L C) Upsilon-
+so ``K`` is the paper's weight gain made time-varying (a constant ``K`` cannot be certified,
+SPEC §3), and ``P_w`` is the weights' covariance: the curve's uncertainty band.
 
-so ``K`` is the paper's weight gain made time-varying (a constant ``K`` cannot be
-certified, SPEC §3). With ``e = xi - xi_hat = Upsilon w_tilde + eta`` the part ``eta``
-obeys the certified error dynamics of :mod:`.gains` and the weights follow a linear
-regression on the innovation. ``adaptation="gradient"`` replaces RLS by a normalised
-gradient step ``K = mu Psi^T R^-1 / (1 + tr(Psi^T R^-1 Psi))``.
-
-Optional latency compensation: a frame that shows the state ``latency`` seconds ago is
-compared with the prediction stored for that instant, and the correction is propagated
-to the present through ``Ad^m`` (exact for the linear part).
+The vocabulary follows filterpy and is the same for every estimator of the package
+(this observer, :class:`~tire_learning_env.baselines.JointUKF`,
+:class:`~tire_learning_env.baselines.LinearKalmanFilter`): :meth:`reset`,
+:meth:`predict` (the car moves), :meth:`update` (a sensor speaks), :meth:`run` (whole
+arrays of rows in compiled code).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import ClassVar, Mapping
 
 import numpy as np
-from numba import njit
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
-from ..params import CameraParams, ParameterError, VehicleParams
-from ._rls import projected_step, rls_gain
+from ..params import ParameterError, VehicleParams, _Params
+from . import _kernel as K
 from .basis import SoftClipBasis
-from .gains import ObserverGains, discretize
+from .gains import ObserverGains
+from .model import MeasurementModel, StateIndex
+from .trace import HEALTH_NAMES, EstimateTrace
 
-__all__ = ["NeuroAdaptiveObserver", "ObserverTrace", "AdaptationParams"]
+__all__ = ["NeuroAdaptiveObserver", "AdaptationParams", "HealthParams", "sensor_rows", "CHANNELS", "N_BIAS_PARAMS"]
+
+#: measurement channels in the order of the kernel's ``z`` columns
+CHANNELS = ("e1", "e2", "ay", "yaw_rate")
+#: sensor offsets appended to the weights when the IMU is read: a_y [m/s^2], yaw rate [rad/s]
+N_BIAS_PARAMS = 2
 
 
 @dataclass(frozen=True)
-class AdaptationParams:
-    """Weight-adaptation settings (standard deviations in units of the basis weight range).
+class AdaptationParams(_Params):
+    """Weight-adaptation settings (weight standard deviations in units of the basis weight range).
 
     Parameters
     ----------
-    law : {"rls", "gradient"}
-        Recursive least squares (default) or normalised gradient.
     initial_std : float
-        Prior std of every weight, ``P_w(0) = (initial_std * r)^2 I`` with ``r`` the
-        basis' :attr:`~.basis.SoftClipBasis.weight_range`.
+        Prior std of every tire weight, ``P_w(0) = (initial_std r)^2 corr`` with ``r`` the
+        basis' :attr:`~.basis.SoftClipBasis.weight_range` and ``corr`` its smooth-curve prior.
     random_walk : float
-        Weight random walk [1/sqrt(s)] (``P_w += (random_walk r)^2 T I`` per frame): keeps
-        learning alive and lets the curve follow slow changes (wear, pressure).
+        Weight random walk [1/sqrt(s)] in the same unit (0: a stationary tire).
     max_std : float
-        Upper bound of each weight's std (``P_w`` stays bounded without excitation).
-    measurement_std : tuple of float, optional
-        ``(e1 [m], e2 [rad])`` std used in ``R``; default the camera's noise (floored
-        at 1 mm and 1 mrad, which also absorbs unmodelled dynamics).
-    step : float
-        Normalised-gradient step ``mu`` (``law="gradient"``), in (0, 2).
+        Cap of each weight's std (``P_w`` stays bounded without excitation).
     settle_time_constants : float
         Weights are frozen after a reset until the initial state error has decayed by
-        ``exp(-settle_time_constants)`` at the certified rate (3: to 5 %), so the start-up
-        transient is not learned as a tire force.
-    prior_length, prior_symmetry : float
-        Smooth-curve prior: the initial covariance is ``(initial_std r)^2`` times
-        :meth:`~.basis.SoftClipBasis.prior_correlation` (neighbouring slip segments and
-        mirror segments learn together); 0 makes the weights independent.
+        ``exp(-settle_time_constants)`` at the certified rate (not learned as a tire force).
+    prior_length : float
+        Length scale [deg of slip] of the smooth slope prior
+        (:meth:`~.basis.SoftClipBasis.slope_prior`).
+    prior_symmetry : float
+        Weight of its left/right mirror term, in [0, 1).
+    sensor_offsets : bool
+        Learn constant offsets of the IMU's ``a_y`` and yaw rate (when the IMU is read).
+    ay_offset_std, yaw_rate_offset_std : float
+        Their prior std [m/s^2], [rad/s] (a 1 deg mounting tilt is 0.17 m/s^2; a MEMS gyro
+        offset a few mrad/s).
     """
 
-    law: str = "rls"
-    initial_std: float = 0.25
+    initial_std: float = 0.5
     random_walk: float = 0.0
     max_std: float = 1.0
-    measurement_std: tuple[float, float] | None = None
-    step: float = 0.2
     settle_time_constants: float = 3.0
     prior_length: float = 1.0
-    prior_symmetry: float = 0.0
+    prior_symmetry: float = 0.8
+    sensor_offsets: bool = True
+    ay_offset_std: float = 0.2
+    yaw_rate_offset_std: float = 0.005
 
-    def __post_init__(self) -> None:
-        if self.law not in ("rls", "gradient"):
-            raise ParameterError(f"AdaptationParams.law must be 'rls' or 'gradient', got {self.law!r}")
-        for name in ("initial_std", "max_std"):
-            if not getattr(self, name) > 0:
-                raise ParameterError(f"AdaptationParams.{name} must be > 0")
-        if not self.random_walk >= 0:
-            raise ParameterError("AdaptationParams.random_walk must be >= 0")
-        if not 0 < self.step < 2:
-            raise ParameterError("AdaptationParams.step must be in (0, 2)")
-        if not self.settle_time_constants >= 0:
-            raise ParameterError("AdaptationParams.settle_time_constants must be >= 0")
+    _positive: ClassVar[tuple[str, ...]] = ("initial_std", "max_std", "ay_offset_std", "yaw_rate_offset_std")
+    _non_negative: ClassVar[tuple[str, ...]] = ("random_walk", "settle_time_constants", "prior_length", "prior_symmetry")
 
 
-@dataclass
-class ObserverTrace:
-    """Per-tick estimates (row ``j`` = posterior at ``t_j``).
+@dataclass(frozen=True)
+class HealthParams(_Params):
+    """Health-flag settings.
 
-    Attributes
+    Parameters
     ----------
-    t : (n,) time [s]
-    xi : (n, 4) estimated ``[e1, e1_dot, e2, e2_dot]``
-    slip : (n, 2) estimated slip angles [rad]
-    force_nonlinear : (n, 2) estimated nonlinear axle force ``f_hat`` [N]
-    force : (n, 2) estimated total axle force ``2 C alpha_hat + f_hat`` [N]
-    weights : (n, 2N) weights
-    innovation : (n, 2) camera innovation ``z - C xi-`` (NaN without frame)
+    window_s : float
+        NIS window length [s] (at least ``min_updates`` updates).
+    min_updates : int
+        Smallest window [updates].
+    nis_factor : float
+        The window's NIS sum may exceed the chi-square bound (probability 1e-4 under a
+        consistent model) by this factor before the flag trips: the model of the noise is
+        estimated, not known, so a consistent estimator must not trip on small errors in it.
+    gap_frames : float
+        The flag trips when no measurement arrived for this many sample periods ...
+    min_gap_s : float
+        ... and at least this long [s].
+    rollback_s : float
+        On a trip the weights return to a checkpoint at least this old [s].
     """
 
-    t: NDArray
-    xi: NDArray
-    slip: NDArray
-    force_nonlinear: NDArray
-    force: NDArray
-    weights: NDArray
-    innovation: NDArray
-    diverged: bool = False
-    diverged_at: float | None = None
-    meta: dict = field(default_factory=dict)
+    window_s: float = 2.0
+    min_updates: int = 10
+    nis_factor: float = 3.0
+    gap_frames: float = 10.0
+    min_gap_s: float = 0.5
+    rollback_s: float = 2.0
 
-    @staticmethod
-    def concatenate(traces: list["ObserverTrace"]) -> "ObserverTrace":
-        keys = ("t", "xi", "slip", "force_nonlinear", "force", "weights", "innovation")
-        out = {k: np.concatenate([getattr(tr, k) for tr in traces]) for k in keys}
-        div = [tr for tr in traces if tr.diverged]
-        return ObserverTrace(**out, diverged=bool(div), diverged_at=div[0].diverged_at if div else None)
+    _positive: ClassVar[tuple[str, ...]] = ("window_s", "min_updates", "nis_factor", "gap_frames", "min_gap_s", "rollback_s")
 
 
-# -- compiled core ------------------------------------------------------------------------
-@njit(cache=True)
-def _activations(a, lo, hi, off, lam, out):
-    """Soft clips (eq. 30) of one slip ``a`` minus their offsets into ``out`` (N,), numerically stable."""
-    for j in range(lo.shape[0]):
-        x1 = -lam * (a - lo[j])
-        x2 = lam * (a - hi[j])
-        sp1 = max(x1, 0.0) + math.log1p(math.exp(-abs(x1)))
-        sp2 = max(x2, 0.0) + math.log1p(math.exp(-abs(x2)))
-        out[j] = a + (sp1 - sp2) / lam - off[j]
+def sensor_rows(sensors: Mapping[str, ArrayLike], model: MeasurementModel) -> dict[str, NDArray]:
+    """The kernel's row arrays from sensor columns: ``t, delta, vx, ax, kappa`` and ``z`` (n, 4).
 
-
-@njit(cache=True)
-def _forces(x, w, delta, pdd, vx, lf, lr, lo, hi, off, lam, gamma, sig, phi):
-    """Slip (eq. 13), ``Gamma Phi`` into ``phi`` (nw,) and ``f_hat`` (eq. 14) at state ``x``."""
-    N = lo.shape[1]
-    af = delta - (x[1] - vx * x[2] + lf * x[3] + lf * pdd) / vx
-    ar = -(x[1] - vx * x[2] - lr * x[3] - lr * pdd) / vx
-    _activations(af, lo[0], hi[0], off[0], lam, sig)
-    ff = 0.0
-    for a in range(N):
-        phi[a] = gamma[0] * sig[a]
-        ff += phi[a] * w[a]
-    _activations(ar, lo[1], hi[1], off[1], lam, sig)
-    fr = 0.0
-    for a in range(N):
-        phi[N + a] = gamma[1] * sig[a]
-        fr += phi[N + a] * w[N + a]
-    return af, ar, ff, fr
-
-
-@njit(cache=True)
-def _predict(x, ups, ff, fr, phi, u0, u1, u2, Ad, Bd, Fd, tmp):
-    """One exact-ZOH tick: ``x = Ad x + Bd u + Fd f``, ``Upsilon = Ad Upsilon + Fd Gamma Phi``."""
-    nw = ups.shape[1]
-    N = nw // 2
-    xn0 = np.empty(4)
-    for r in range(4):
-        acc = Bd[r, 0] * u0 + Bd[r, 1] * u1 + Bd[r, 2] * u2 + Fd[r, 0] * ff + Fd[r, 1] * fr
-        for c in range(4):
-            acc += Ad[r, c] * x[c]
-        xn0[r] = acc
-    for r in range(4):
-        x[r] = xn0[r]
-    for c in range(nw):
-        for r in range(4):
-            acc = 0.0
-            for k in range(4):
-                acc += Ad[r, k] * ups[k, c]
-            tmp[r, c] = acc
-    for c in range(N):
-        for r in range(4):
-            ups[r, c] = tmp[r, c] + Fd[r, 0] * phi[c]
-            ups[r, N + c] = tmp[r, N + c] + Fd[r, 1] * phi[N + c]
-
-
-@njit(cache=True)
-def _correct(x, w, ups, pw, nu1, nu2, L, law, r_term, q_dt, p_max, mu, wlo, whi, kg, pk, psi, dw):
-    """Frame correction: weights by RLS/gradient with projection, then state and sensitivity."""
-    nw = w.shape[0]
-    for a in range(nw):  # Psi = C Upsilon (rows e1 and e2)
-        psi[0, a] = ups[0, a]
-        psi[1, a] = ups[2, a]
-    if law == 0:  # recursive least squares, r_term = diag(R)
-        rls_gain(pw, psi, r_term[0], r_term[1], q_dt, p_max, kg, pk)
-    elif law == -1:  # adaptation frozen (settling after a reset)
-        for a in range(nw):
-            kg[a, 0] = 0.0
-            kg[a, 1] = 0.0
-    else:  # normalised gradient, r_term = diag(R^-1)
-        norm = 1.0
-        for a in range(nw):
-            norm += psi[0, a] * psi[0, a] * r_term[0] + psi[1, a] * psi[1, a] * r_term[1]
-        for a in range(nw):
-            kg[a, 0] = mu * psi[0, a] * r_term[0] / norm
-            kg[a, 1] = mu * psi[1, a] * r_term[1] / norm
-    projected_step(w, kg, nu1, nu2, wlo, whi, dw)
-    ud0 = 0.0
-    ud2 = 0.0
-    for r in range(4):  # xi += L nu + (I - L C) Upsilon dw
-        acc = 0.0
-        for a in range(nw):
-            acc += ups[r, a] * dw[a]
-        if r == 0:
-            ud0 = acc
-        elif r == 2:
-            ud2 = acc
-        x[r] += acc
-    for r in range(4):
-        x[r] += L[r, 0] * (nu1 - ud0) + L[r, 1] * (nu2 - ud2)
-    for c in range(nw):  # Upsilon = (I - L C) Upsilon
-        u0 = ups[0, c]
-        u2 = ups[2, c]
-        for r in range(4):
-            ups[r, c] -= L[r, 0] * u0 + L[r, 1] * u2
-
-
-@njit(cache=True)
-def _observer_kernel(
-    delta, pdd, pddd, z1, z2, predict_last,
-    x, w, ups, pw,
-    Ad, Bd, Fd, L,
-    lo, hi, off, lam, gamma, wlo, whi, lf, lr, vx,
-    law, r_term, q_dt, p_max, mu,
-    lat_m, hist_x, hist_ups, hist_u, hist_i,
-    div_bound, div_state, settle,
-    out_x, out_slip, out_f, out_w, out_nu,
-):  # fmt: skip
-    """Rows in order: [store prior] -> correct with the row's frame -> record -> predict.
-
-    ``settle = [ticks since reset, ticks to wait]``: before that the weights stay frozen
-    (state-only correction).
+    ``kappa`` comes from ``kappa`` or ``psi_dot_des / vx``; channels the model does not read
+    are NaN. Ground truth (``true_*``) is refused.
     """
-    n = delta.shape[0]
-    nw = w.shape[0]
-    N = nw // 2
-    sig = np.empty(N)
-    phi = np.empty(nw)
-    kg = np.empty((nw, 2))
-    pk = np.empty((2, nw))
-    psi = np.empty((2, nw))
-    dw = np.empty(nw)
-    tmp = np.empty((4, nw))
-    hlen = hist_x.shape[0]
-    for j in range(n):
-        if lat_m > 0:  # remember the prior and the inputs of this tick
-            h = hist_i[0] % hlen
-            for r in range(4):
-                hist_x[h, r] = x[r]
-                for c in range(nw):
-                    hist_ups[h, r, c] = ups[r, c]
-            hist_u[h, 0] = delta[j]
-            hist_u[h, 1] = pdd[j]
-            hist_u[h, 2] = pddd[j]
-            hist_i[0] += 1
-        if z1[j] == z1[j] and z2[j] == z2[j]:
-            back = lat_m if lat_m < hist_i[0] else hist_i[0] - 1
-            if lat_m > 0 and back > 0:
-                # the frame shows t_j - latency: restore the prior stored then, correct there,
-                # and predict forward again with the stored inputs (out-of-sequence update)
-                k0 = hist_i[0] - 1 - back
-                hk = k0 % hlen
-                for r in range(4):
-                    x[r] = hist_x[hk, r]
-                    for c in range(nw):
-                        ups[r, c] = hist_ups[hk, r, c]
-            nu1 = z1[j] - x[0]
-            nu2 = z2[j] - x[2]
-            out_nu[j, 0] = nu1
-            out_nu[j, 1] = nu2
-            if abs(nu1) > div_bound[0] or abs(nu2) > div_bound[1]:
-                div_state[0] += 1.0
-                if div_state[0] >= 5.0 and div_state[1] == 0.0:
-                    div_state[1] = 1.0
-                    div_state[2] = j
-            else:
-                div_state[0] = 0.0
-            _correct(x, w, ups, pw, nu1, nu2, L, law if settle[0] >= settle[1] else -1, r_term, q_dt, p_max, mu, wlo, whi, kg, pk, psi, dw)
-            if lat_m > 0 and back > 0:
-                k0 = hist_i[0] - 1 - back
-                for i in range(k0, hist_i[0] - 1):
-                    hi_ = i % hlen
-                    u0, u1, u2 = hist_u[hi_, 0], hist_u[hi_, 1], hist_u[hi_, 2]
-                    af, ar, ff, fr = _forces(x, w, u0, u1, vx, lf, lr, lo, hi, off, lam, gamma, sig, phi)
-                    _predict(x, ups, ff, fr, phi, u0, u1, u2, Ad, Bd, Fd, tmp)
-                    hn = (i + 1) % hlen
-                    for r in range(4):
-                        hist_x[hn, r] = x[r]
-                        for c in range(nw):
-                            hist_ups[hn, r, c] = ups[r, c]
-        else:
-            out_nu[j, 0] = math.nan
-            out_nu[j, 1] = math.nan
-        af, ar, ff, fr = _forces(x, w, delta[j], pdd[j], vx, lf, lr, lo, hi, off, lam, gamma, sig, phi)
-        for r in range(4):
-            out_x[j, r] = x[r]
-        out_slip[j, 0] = af
-        out_slip[j, 1] = ar
-        out_f[j, 0] = ff
-        out_f[j, 1] = fr
-        for a in range(nw):
-            out_w[j, a] = w[a]
-        if j < n - 1 or predict_last:
-            _predict(x, ups, ff, fr, phi, delta[j], pdd[j], pddd[j], Ad, Bd, Fd, tmp)
-            settle[0] += 1
+    leaked = [k for k in sensors if str(k).startswith("true")]
+    if leaked:
+        raise ValueError(f"estimators must not see ground truth; got columns {leaked}")
+    need = ["t", "delta", "vx"]
+    if model.uses_camera:
+        need += ["e1", "e2"]
+    if model.uses_imu:
+        need += ["ay", "yaw_rate"]
+    missing = [k for k in need if k not in sensors]
+    if model.uses_camera and "kappa" not in sensors and "psi_dot_des" not in sensors:
+        missing.append("kappa")
+    if missing:
+        raise ParameterError(f"{model.name} estimation needs sensor columns {missing}")
+    get = lambda k: np.ascontiguousarray(np.asarray(sensors[k], dtype=float))  # noqa: E731
+    t, delta, vx = get("t"), get("delta"), get("vx")
+    n = len(t)
+    if not (len(delta) == len(vx) == n):
+        raise ParameterError("sensor columns must have equal lengths")
+    ax = get("ax") if "ax" in sensors else np.zeros(n)
+    ax = np.where(np.isfinite(ax), ax, 0.0)
+    if model.uses_camera:
+        kappa = get("kappa") if "kappa" in sensors else get("psi_dot_des") / np.maximum(vx, 1e-3)
+        kappa = np.where(np.isfinite(kappa), kappa, 0.0)
+    else:
+        kappa = np.zeros(n)
+    z = np.full((n, 4), np.nan)
+    if model.uses_camera:
+        z[:, 0], z[:, 1] = get("e1"), get("e2")
+    if model.uses_imu:
+        z[:, 2], z[:, 3] = get("ay"), get("yaw_rate")
+    return {"t": t, "delta": delta, "vx": vx, "ax": ax, "kappa": np.ascontiguousarray(kappa), "z": z}
 
 
 class NeuroAdaptiveObserver:
-    """Neuro-adaptive observer of the lateral error states and the tire-force weights.
+    """Neuro-adaptive estimator of the states and the tire-force weights, for any sensor set.
 
     Parameters
     ----------
     vehicle : VehicleParams
-        Nominal vehicle (its ``Cf``, ``Cr`` give the linear part ``2 C alpha``).
+        Nominal vehicle (its ``Cf``, ``Cr`` give the linear part ``2 C alpha`` of the curves).
     basis : SoftClipBasis
-        Activations, scales ``gamma`` and ``W_max``.
+        Activations, scales ``gamma`` and the weight box.
     gains : ObserverGains
-        Certified frame gain (:func:`.gains.synthesize_gains`).
-    physics_dt : float
-        Prediction step [s] (the rows of the data).
+        Certified gains (:func:`.gains.synthesize_gains`); its ``model`` is the sensor set.
+    noise_std : array (4,)
+        Measurement noise std of ``e1`` [m], ``e2`` [rad], ``a_y`` [m/s^2], ``r`` [rad/s]
+        (e.g. estimated from the log, :mod:`.calibration`).
+    latency : float
+        Camera latency [s]: a frame shows the state that long before it is delivered.
+    force_error : float
+        Std of the force error the model makes [N] (basis residual, unmodelled dynamics),
+        white over ``force_error_period``: the process noise of ``Sigma``.
+    force_error_period : float
+        [s].
     adaptation : AdaptationParams, optional
-        Weight-adaptation law and its settings.
-    camera : CameraParams, optional
-        Sets the default measurement noise in ``R`` and the latency.
-    latency_compensation : bool
-        Compensate ``camera.latency`` (delayed-frame correction).
-    divergence_bound : tuple of float
-        Innovation ``(e1 [m], e2 [rad])`` beyond which, on 5 consecutive frames, the
-        estimate is flagged as diverged (:attr:`diverged`); it is not silently continued.
-    initial_weights : array_like, optional
-        ``w(0)`` (2N,), e.g. from :func:`.warm_start.least_squares_weights`.
-
-    Notes
-    -----
-    The vocabulary follows filterpy: :meth:`predict` advances one tick with the known
-    inputs, :meth:`update` corrects with a frame; :meth:`run` processes whole arrays of
-    rows (correct-then-predict per row) in compiled code.
+    health : HealthParams, optional
+    initial_weights : array, optional
+        ``w(0)`` (tire weights, then the sensor offsets if any).
+    physics_dt : float
+        Prediction step after the last row of a :meth:`run` and the default of :meth:`predict` [s].
+    h_max : float
+        Largest integration sub-step [s].
+    sample_period : float, optional
+        Nominal period of the measurements [s] (health window and gap limit); default the
+        gains' frame period.
+    pinned_slip : float
+        The nominal stiffness is trusted up to this slip [rad]: the prior of the segments
+        inside it is 1000 times tighter (the curve is pinned there). 0: learned everywhere.
     """
 
     def __init__(
@@ -358,208 +201,303 @@ class NeuroAdaptiveObserver:
         vehicle: VehicleParams,
         basis: SoftClipBasis,
         gains: ObserverGains,
-        physics_dt: float = 1e-3,
+        noise_std: ArrayLike,
+        latency: float = 0.0,
+        force_error: float = 100.0,
+        force_error_period: float = 0.05,
         adaptation: AdaptationParams | None = None,
-        camera: CameraParams | None = None,
-        latency_compensation: bool = False,
-        divergence_bound: tuple[float, float] = (1.0, 0.2),
-        initial_weights: NDArray | None = None,
+        health: HealthParams | None = None,
+        initial_weights: ArrayLike | None = None,
+        physics_dt: float = 1e-3,
+        h_max: float = 0.01,
+        sample_period: float | None = None,
+        pinned_slip: float = 0.0,
     ) -> None:
         if not physics_dt > 0:
             raise ParameterError(f"physics_dt must be > 0, got {physics_dt!r}")
+        if not latency >= 0:
+            raise ParameterError(f"latency must be >= 0 s, got {latency!r}")
+        noise = np.asarray(noise_std, dtype=float).reshape(4)
+        if not np.all(noise > 0):
+            raise ParameterError(f"noise_std must be 4 positive values (e1, e2, a_y, r), got {noise_std!r}")
         self.vehicle = vehicle
         self.basis = basis
         self.gains = gains
-        self.dt = float(physics_dt)
+        self.model: MeasurementModel = gains.model
+        self.noise_std = noise
+        self.latency = float(latency)
+        self.force_error = float(force_error)
+        self.force_error_period = float(force_error_period)
         self.adaptation = adaptation or AdaptationParams()
-        self.camera = camera or CameraParams()
-        self.divergence_bound = np.asarray(divergence_bound, dtype=float)
-        self._disc_cache: dict[float, tuple] = {}
-        std = self.adaptation.measurement_std
-        if std is None:
-            std = tuple(max(a, b) for a, b in zip(self.camera.noise_std, (1e-3, 1e-3)))
-        self.measurement_std = np.asarray(std, dtype=float)
-        lat = self.camera.latency if latency_compensation else 0.0
-        self.latency_ticks = int(round(lat / self.dt))
-        self.initial_weights = (
-            np.zeros(basis.n_weights) if initial_weights is None else np.asarray(initial_weights, dtype=float).copy()
-        )
-        if self.initial_weights.shape != (basis.n_weights,):
-            raise ParameterError(f"initial_weights must have shape ({basis.n_weights},)")
+        self.health_params = health or HealthParams()
+        self.dt = float(physics_dt)
+        self.h_max = float(h_max)
+        self.sample_period = float(sample_period or gains.frame_period)
+        self.pinned_slip = float(pinned_slip)
+        self.n_bias = N_BIAS_PARAMS if (self.model.uses_imu and self.adaptation.sensor_offsets) else 0
+        nw = basis.n_weights + self.n_bias
+        w0 = np.zeros(nw) if initial_weights is None else np.asarray(initial_weights, dtype=float).reshape(-1)
+        if w0.shape != (nw,):
+            raise ParameterError(f"initial_weights must have shape ({nw},) (tire weights, then {self.n_bias} sensor offsets)")
+        self.initial_weights = w0.copy()
+        self._model_tuple = self._make_model()
+        self._gain_tuple = K.Gains(np.ascontiguousarray(gains.edges), np.ascontiguousarray(gains.L_cam),
+                                   np.ascontiguousarray(gains.L_imu))  # fmt: skip
         self.reset()
 
-    # -- state ---------------------------------------------------------------------------
-    def reset(self, xi0: NDArray | None = None, weights: NDArray | None = None) -> None:
-        """Start again from ``xi0`` (default zero, as in the paper) and ``weights``."""
-        nw = self.basis.n_weights
-        self.x = np.zeros(4) if xi0 is None else np.asarray(xi0, dtype=float).reshape(4).copy()
-        w0 = self.initial_weights if weights is None else np.asarray(weights, dtype=float)
-        self.w = np.clip(w0, self.basis.weight_lower.ravel(), self.basis.weight_upper.ravel()).astype(float)
-        self.ups = np.zeros((4, nw))
-        a = self.adaptation
-        corr = self.basis.prior_correlation(a.prior_length, a.prior_symmetry)
-        self.pw = np.ascontiguousarray(corr * (a.initial_std * self.basis.weight_range) ** 2)
-        hlen = max(self.latency_ticks + 2, 2)
-        self.hist_x = np.zeros((hlen, 4))
-        self.hist_ups = np.zeros((hlen, 4, nw))
-        self.hist_u = np.zeros((hlen, 3))
-        self.hist_i = np.zeros(1, dtype=np.int64)
-        self.div_state = np.zeros(3)
-        settle_s = self.adaptation.settle_time_constants / max(self.gains.decay_rate, 1e-6)
-        self.settle = np.array([0, int(round(settle_s / self.dt))], dtype=np.int64)
-        self.t = 0.0
+    # -- construction helpers ---------------------------------------------------------------------
+    def set_force_error(self, force_error: float) -> None:
+        """Change the process-noise force error std [N] (keeps the state)."""
+        if not force_error > 0:
+            raise ParameterError(f"force_error must be > 0 N, got {force_error!r}")
+        self.force_error = float(force_error)
+        self._model_tuple = self._make_model()
 
     @property
-    def diverged(self) -> bool:
-        """Whether the innovation exceeded the divergence bound on 5 consecutive frames."""
-        return bool(self.div_state[1])
+    def n_weights(self) -> int:
+        return self.basis.n_weights + self.n_bias
+
+    def _weight_box(self) -> tuple[NDArray, NDArray]:
+        b = self.basis
+        lo = np.r_[b.weight_lower.ravel(), np.full(self.n_bias, -np.inf)]
+        hi = np.r_[b.weight_upper.ravel(), np.full(self.n_bias, np.inf)]
+        return lo, hi
+
+    def _make_model(self) -> K.Model:
+        v, b = self.vehicle, self.basis
+        wlo, whi = self._weight_box()
+        q = self.force_error**2 * self.force_error_period
+        return K.Model(
+            np.array([v.m, v.Iz, v.lf, v.lr, 2.0 * v.Cf, 2.0 * v.Cr]), np.ascontiguousarray(b.lower),
+            np.ascontiguousarray(b.upper), np.ascontiguousarray(b.offset), float(b.sharpness), np.ascontiguousarray(b.scale),
+            int(self.n_bias), np.ascontiguousarray(wlo), np.ascontiguousarray(whi), int(self.model.nx), np.array([q, q]),
+            float(self.h_max),
+        )  # fmt: skip
+
+    def prior_covariance(self) -> NDArray:
+        """``P_w(0)``: smooth-curve prior of the tire weights, independent sensor offsets."""
+        a, b = self.adaptation, self.basis
+        tire = b.slope_prior(math.radians(a.prior_length), a.prior_symmetry) * (a.initial_std * b.weight_range) ** 2
+        if self.pinned_slip > 0:
+            inner = ((np.maximum(np.abs(b.lower), np.abs(b.upper)) <= self.pinned_slip + 1e-12) & (b.lower != b.upper)).ravel()
+            scale = np.where(inner, 1e-3, 1.0)
+            tire = tire * np.outer(scale, scale)
+        if not self.n_bias:
+            return tire
+        return sla_block_diag(tire, np.diag([a.ay_offset_std**2, a.yaw_rate_offset_std**2]))
+
+    def initial_state_covariance(self) -> NDArray:
+        """Prior covariance of the state (the zero initial state of the paper)."""
+        std = np.array([0.5, 0.05, 0.5, 0.02])[: self.model.nx]
+        return np.diag(std**2)
+
+    @property
+    def settle_s(self) -> float:
+        return self.adaptation.settle_time_constants / max(self.gains.decay_rate, 0.05)
+
+    def _settings(self, mode: int, t0: float, adapt: bool = True, store_scores: bool = False,
+                  accumulate_from: float = -np.inf, gate: float = np.inf, compute_std: bool = True,
+                  store_weights: bool = True, kalman: bool = False) -> K.Settings:  # fmt: skip
+        hp, a = self.health_params, self.adaptation
+        wr = self.basis.weight_range
+        return K.Settings(
+            np.ascontiguousarray(self.noise_std**2), bool(self.model.uses_camera), bool(self.model.uses_imu),
+            float(self.latency), int(mode), bool(adapt), float((a.random_walk * wr) ** 2),
+            float((a.max_std * wr) ** 2), float(t0 + self.settle_s),
+            float(max(hp.gap_frames * self.sample_period, hp.min_gap_s)), float(hp.nis_factor), float(hp.rollback_s),
+            float(gate), float(accumulate_from), np.zeros(self.model.nx), self.initial_state_covariance(), float(self.dt),
+            bool(store_weights), bool(store_scores), bool(compute_std), bool(kalman),
+        )  # fmt: skip
+
+    # -- state ------------------------------------------------------------------------------------
+    def reset(self, state: ArrayLike | None = None, weights: ArrayLike | None = None) -> "NeuroAdaptiveObserver":
+        """Start again from ``state`` (default zero, as in the paper) and ``weights`` (default
+        the initial ones), with the prior weight covariance."""
+        nx, nw = self.model.nx, self.n_weights
+        x = np.zeros(nx) if state is None else np.asarray(state, dtype=float).reshape(nx).copy()
+        w = self.initial_weights if weights is None else np.asarray(weights, dtype=float).reshape(nw)
+        lo, hi = self._weight_box()
+        W = max(int(round(self.health_params.window_s / self.sample_period)), int(self.health_params.min_updates))
+        hlen = int(math.ceil(self.latency / max(self.dt, 1e-4))) + 3 if self.latency > 0 else 1
+        hs = np.zeros(K.N_HS)
+        hs[K.HS_CODE] = K.HEALTH_SETTLING
+        self._state = K.State(
+            x, np.clip(w, lo, hi).astype(float), np.zeros((nx, nw)), self.initial_state_covariance(),
+            np.ascontiguousarray(self.prior_covariance()), hs, np.zeros((min(W, 4000), 2)), np.zeros(8), np.zeros((8, nw)),
+            np.zeros((8, nw, nw)), np.zeros(hlen), np.zeros((hlen, nx)), np.zeros((hlen, nx, nw)), np.zeros((hlen, nx, nx)),
+            np.zeros((hlen, 6)), np.zeros(2, dtype=np.int64),
+        )  # fmt: skip
+        self._t0: float | None = None
+        self.t = 0.0
+        return self
+
+    @property
+    def state(self) -> NDArray:
+        """Current state estimate ``[vy, r(, e1, e2)]``."""
+        return self._state.x.copy()
 
     @property
     def weights(self) -> NDArray:
-        return self.w.copy()
+        return self._state.w.copy()
 
-    # -- model ---------------------------------------------------------------------------
-    def _discretization(self, vx: float):
-        key = round(float(vx), 2)
-        hit = self._disc_cache.get(key)
-        if hit is None:
-            d = discretize(self.vehicle, self.dt, key)
-            hit = (np.ascontiguousarray(d.Ad), np.ascontiguousarray(d.Bd), np.ascontiguousarray(d.Fd))
-            self._disc_cache[key] = hit
-        return hit
+    @property
+    def pw(self) -> NDArray:
+        """Current weight covariance ``P_w``."""
+        return self._state.pw
 
-    def _kernel_constants(self, vx: float) -> tuple:
-        b, a = self.basis, self.adaptation
-        r = self.measurement_std**2
-        r_term = r if a.law == "rls" else 1.0 / r  # RLS uses R, the gradient R^-1
-        return (
-            *self._discretization(vx), np.ascontiguousarray(self.gains.L),
-            b.lower, b.upper, b.offset, float(b.sharpness), b.scale,
-            np.ascontiguousarray(b.weight_lower.ravel()), np.ascontiguousarray(b.weight_upper.ravel()),
-            self.vehicle.lf, self.vehicle.lr, float(vx),
-            0 if a.law == "rls" else 1, np.ascontiguousarray(r_term),
-            (a.random_walk * self.basis.weight_range) ** 2 * self.gains.frame_period,
-            (a.max_std * self.basis.weight_range) ** 2, a.step,
-            self.latency_ticks, self.hist_x, self.hist_ups, self.hist_u, self.hist_i,
-            self.divergence_bound, self.div_state, self.settle,
-        )  # fmt: skip
+    @property
+    def health(self) -> str:
+        """Current health flag (:data:`~.trace.HEALTH_NAMES`)."""
+        return HEALTH_NAMES[int(self._state.hs[K.HS_CODE])]
 
-    def run(self, sensors: dict[str, NDArray], predict_last: bool = True) -> ObserverTrace:
-        """Process rows of sensor data (correct with the row's frame, then predict one tick).
+    @property
+    def trips(self) -> int:
+        """How often the health flag tripped since the last reset."""
+        return int(self._state.hs[K.HS_TRIPS])
+
+    # -- verbs ------------------------------------------------------------------------------------
+    def run(self, sensors: Mapping[str, ArrayLike], predict_last: bool = True, *, mode: str = "causal",
+            adapt: bool = True, accumulator: K.Accumulator | None = None, accumulate_from: float = -np.inf,
+            gate: float = np.inf, store_scores: bool = False, compute_std: bool = True,
+            store_weights: bool = True, kalman: bool = False) -> EstimateTrace:  # fmt: skip
+        """Process rows of sensor data, continuing from the current state.
 
         Parameters
         ----------
-        sensors : dict of str -> ndarray
-            Equal-length arrays ``t, delta, vx, psi_dot_des, psi_ddot_des, e1, e2``
-            (``e1``/``e2`` NaN where no frame arrived), e.g. ``SimulationLog.sensors``,
-            an env's ``info["sensor_log"]`` or :func:`sensors_from_log`. Ground truth is
-            not accepted.
+        sensors : mapping of str -> array
+            Equal-length columns ``t, delta, vx`` (``ax`` optional), ``kappa`` (or
+            ``psi_dot_des``), ``e1, e2`` for the camera and ``ay, yaw_rate`` for the IMU (NaN
+            where no sample arrived): an env's ``info["sensor_log"]``, a
+            :class:`~tire_learning_env.simulation.SimulationLog`'s ``sensors`` or a log's.
+            Ground truth is refused.
+        predict_last : bool
+            Predict one ``physics_dt`` past the last row (so that the next call continues
+            exactly).
+        mode : {"causal", "fixed"}
+            ``fixed`` holds the weights and accumulates the prediction-error fit into
+            ``accumulator`` (:mod:`.offline`).
 
         Returns
         -------
-        ObserverTrace
+        EstimateTrace
         """
-        leaked = [k for k in sensors if k.startswith("true")]
-        if leaked:
-            raise ValueError(f"the observer must not see ground truth; got columns {leaked}")
-        t = np.asarray(sensors["t"], dtype=float)
-        n = len(t)
-        vx_all = np.asarray(sensors["vx"], dtype=float)
-        cols = [np.ascontiguousarray(sensors[k], dtype=float) for k in ("delta", "psi_dot_des", "psi_ddot_des", "e1", "e2")]
-        nw = self.basis.n_weights
-        out_x, out_slip, out_f = np.empty((n, 4)), np.empty((n, 2)), np.empty((n, 2))
-        out_w, out_nu = np.empty((n, nw)), np.empty((n, 2))
-        # segments of (nearly) constant speed share one discretisation
-        start = 0
-        while start < n:
-            v0 = round(float(vx_all[start]), 2)
-            stop = start + 1
-            if np.all(np.abs(vx_all[start:] - v0) < 0.005):
-                stop = n
-            else:
-                while stop < n and abs(vx_all[stop] - v0) < 0.005:
-                    stop += 1
-            sl = slice(start, stop)
-            _observer_kernel(
-                *(c[sl] for c in cols), bool(predict_last or stop < n), self.x, self.w, self.ups, self.pw,
-                *self._kernel_constants(v0),
-                out_x[sl], out_slip[sl], out_f[sl], out_w[sl], out_nu[sl],
-            )  # fmt: skip
-            start = stop
+        rows = sensor_rows(sensors, self.model)
+        n = len(rows["t"])
+        nx, nw = self.model.nx, self.n_weights
+        if n and self._t0 is None:
+            self._t0 = float(rows["t"][0])
+        m = K.MODE_FIXED if mode == "fixed" else K.MODE_CAUSAL
+        S = self._settings(m, self._t0 or 0.0, adapt=adapt, store_scores=store_scores, accumulate_from=accumulate_from,
+                           gate=gate, compute_std=compute_std, store_weights=store_weights, kalman=kalman)  # fmt: skip
+        acc = accumulator if accumulator is not None else K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4))
+        out = K.Outputs(
+            np.empty((n, nx)), np.empty((n, 2)), np.empty((n, 2)), np.empty((n, 2)),
+            np.empty((n if store_weights else 0, nw)), np.empty((n if compute_std else 0, nx)), np.empty((n, 4)),
+            np.empty(n), np.empty(n, dtype=np.int8), np.zeros((n if store_scores else 0, nw)),
+        )  # fmt: skip
         if n:
-            self.t = float(t[-1]) + (self.dt if predict_last else 0.0)
-        lin = out_slip * np.array([2 * self.vehicle.Cf, 2 * self.vehicle.Cr])
-        diverged_at = float(t[int(self.div_state[2])]) if self.diverged and n else None
-        return ObserverTrace(t, out_x, out_slip, out_f, lin + out_f, out_w, out_nu, self.diverged, diverged_at)
+            wk = K.make_work(nx, nw)
+            K.run_rows(rows["t"], rows["delta"], rows["vx"], rows["ax"], rows["kappa"], rows["z"], self._model_tuple,
+                       self._gain_tuple, S, self._state, acc, out, wk, bool(predict_last))  # fmt: skip
+            self.t = float(rows["t"][-1]) + (self.dt if predict_last else 0.0)
+        lin = out.slip * np.array([2.0 * self.vehicle.Cf, 2.0 * self.vehicle.Cr])
+        trace = EstimateTrace(
+            rows["t"], out.x, out.slip, out.force, out.force - lin, out.w, out.std, out.health, out.nu, out.nis,
+            rows["vx"], rows["kappa"], self.model.state_names, {"sensors": self.model.name},
+        )  # fmt: skip
+        if store_scores:
+            trace.meta["scores"] = out.score
+        return trace
 
-    def predict(self, delta: float, psi_dot_des: float, psi_ddot_des: float, vx: float | None = None) -> None:
-        """Advance one tick ``dt`` with the known inputs held (no frame)."""
-        self.run(self._row(delta, psi_dot_des, psi_ddot_des, vx, math.nan, math.nan))
+    def predict(self, dt: float | None = None, delta: float = 0.0, vx: float | None = None, kappa: float = 0.0,
+                ax: float = 0.0) -> "NeuroAdaptiveObserver":  # fmt: skip
+        """Advance ``dt`` [s] (default ``physics_dt``) with the inputs held: steering [rad],
+        speed [m/s], path curvature [1/m], longitudinal acceleration [m/s^2]."""
+        dt = self.dt if dt is None else float(dt)
+        vx = self.vehicle.vx if vx is None else float(vx)
+        S = self._settings(K.MODE_CAUSAL, self._t0 or self.t)
+        wk = K.make_work(self.model.nx, self.n_weights)
+        K.predict(self._state, dt, float(delta), vx, float(ax), float(kappa), self._model_tuple, S, wk)
+        self.t += dt
+        return self
 
-    def update(self, z: tuple[float, float], delta: float, psi_dot_des: float, vx: float | None = None) -> None:
-        """Correct the current estimate with the frame ``z = (e1 [m], e2 [rad])`` (no time advance).
-
-        ``delta`` and ``psi_dot_des`` are the current inputs (for the slip estimate).
-        """
-        self.run(self._row(delta, psi_dot_des, 0.0, vx, z[0], z[1]), predict_last=False)
-
-    def _row(self, delta, pdd, pddd, vx, e1, e2) -> dict:
-        vx = self.vehicle.vx if vx is None else vx
-        return {
-            "t": np.array([self.t]),
-            "delta": np.array([delta]),
-            "vx": np.array([vx]),
-            "psi_dot_des": np.array([pdd]),
-            "psi_ddot_des": np.array([pddd]),
-            "e1": np.array([e1]),
-            "e2": np.array([e2]),
-        }
+    def update(self, z: ArrayLike | Mapping[str, float], delta: float = 0.0, vx: float | None = None) -> "NeuroAdaptiveObserver":
+        """Correct with a measurement now: ``z`` = ``[e1, e2, a_y, r]`` (NaN: not measured) or a
+        mapping of those channel names (``yaw_rate`` for ``r``); ``delta`` [rad], ``vx`` [m/s]
+        are the current inputs. The weights adapt as in :meth:`run`."""
+        vx = self.vehicle.vx if vx is None else float(vx)
+        if isinstance(z, Mapping):
+            zz = np.array([float(z.get(c, np.nan)) for c in CHANNELS])
+        else:
+            zz = np.asarray(z, dtype=float).reshape(-1)
+            if zz.size == 2 and self.model.uses_camera and not self.model.uses_imu:
+                zz = np.r_[zz, np.nan, np.nan]
+            if zz.size != 4:
+                raise ParameterError(f"z must hold 4 channels (e1, e2, a_y, r) or be a mapping, got {zz.size} values")
+        cols = {"t": np.array([self.t]), "delta": np.array([float(delta)]), "vx": np.array([vx]), "kappa": np.zeros(1),
+                "e1": zz[:1], "e2": zz[1:2], "ay": zz[2:3], "yaw_rate": zz[3:4]}  # fmt: skip
+        self.run(cols, predict_last=False)
+        return self
 
     def estimate_now(self, delta: float, psi_dot_des: float, vx: float | None = None) -> dict[str, NDArray]:
-        """The current (predicted) estimate with the inputs held: state, slip, forces.
-
-        After :meth:`run` the observer has predicted to the instant after the last row;
-        this evaluates slip (eq. 13) and force (eq. 14, 29) there, the same instant as an
-        env's end-of-step ground truth.
-        """
-        vx = self.vehicle.vx if vx is None else vx
+        """The current (predicted) estimate with the inputs held: state, slip, forces, std, health."""
+        vx = self.vehicle.vx if vx is None else float(vx)
+        x = self._state.x
         v = self.vehicle
-        x = self.x
-        af = delta - (x[1] - vx * x[2] + v.lf * x[3] + v.lf * psi_dot_des) / vx
-        ar = -(x[1] - vx * x[2] - v.lr * x[3] - v.lr * psi_dot_des) / vx
+        vf = max(vx, K.V_FLOOR)
+        af = delta - (x[StateIndex.VY] + v.lf * x[StateIndex.R]) / vf  # eq. (13)
+        ar = -(x[StateIndex.VY] - v.lr * x[StateIndex.R]) / vf
         slip = np.array([af, ar])
-        fnl = np.array([float(self.basis.nonlinear_force(slip[i], self.w, i)) for i in (0, 1)])
+        w = self._state.w
+        fnl = np.array([float(self.basis.nonlinear_force(slip[i], w[: self.basis.n_weights], i)) for i in (0, 1)])
+        if self.model.uses_camera:
+            kappa = psi_dot_des / max(vx, 1e-3)
+            from .model import to_error_state
+
+            state = to_error_state(x, vx, kappa)
+        else:
+            state = x.copy()
+        pw = self._state.pw
+        ups = self._state.ups
+        std = np.sqrt(np.maximum(np.diag(self._state.sig + ups @ pw @ ups.T), 0.0))
         return {
-            "state": x.copy(),
+            "state": state,
             "slip": slip,
             "force_nonlinear": fnl,
             "force": fnl + slip * np.array([2 * v.Cf, 2 * v.Cr]),
-            "weights": self.w.copy(),
-            "diverged": self.diverged,
+            "weights": w.copy(),
+            "std": std,
+            "health": self.health,
         }
 
-    # -- learned tire curve (eq. 29) -------------------------------------------------------
-    def axle_force(self, alpha: NDArray, axle: str, weights: NDArray | None = None) -> NDArray:
+    # -- learned tire curve (eq. 29) --------------------------------------------------------------
+    def axle_force(self, alpha: ArrayLike, axle: str | int, weights: ArrayLike | None = None) -> NDArray:
         """Learned total axle force ``2 C alpha + gamma sum W sigma(alpha)`` [N] (eq. 29)."""
-        i = _axle_index(axle)
-        w = self.w if weights is None else weights
-        c2 = 2 * (self.vehicle.Cf if i == 0 else self.vehicle.Cr)
+        i = axle_index(axle)
+        w = self._state.w if weights is None else np.asarray(weights, dtype=float)
+        c2 = 2.0 * (self.vehicle.Cf if i == 0 else self.vehicle.Cr)
         a = np.asarray(alpha, dtype=float)
-        return c2 * a + self.basis.nonlinear_force(a, w, i)
+        return c2 * a + self.basis.nonlinear_force(a, w[: self.basis.n_weights], i)
 
-    def cornering_stiffness(self, weights: NDArray | None = None) -> tuple[float, float]:
+    def cornering_stiffness(self, weights: ArrayLike | None = None) -> tuple[float, float]:
         """Per-tire cornering stiffness: half the slope of the learned axle curve at zero slip [N/rad]."""
-        w = self.w if weights is None else weights
+        w = self._state.w if weights is None else np.asarray(weights, dtype=float)
         out = []
         for i, c in enumerate((self.vehicle.Cf, self.vehicle.Cr)):
-            slope = 2 * c + float(self.basis.nonlinear_slope(0.0, w, i))
-            out.append(slope / 2.0)
+            out.append((2.0 * c + float(self.basis.nonlinear_slope(0.0, w[: self.basis.n_weights], i))) / 2.0)
         return out[0], out[1]
 
 
-def _axle_index(axle: str) -> int:
+def axle_index(axle) -> int:
+    """0 for ``"front"``/0, 1 for ``"rear"``/1."""
     if axle in ("front", 0):
         return 0
     if axle in ("rear", 1):
         return 1
     raise ParameterError(f"axle must be 'front' or 'rear', got {axle!r}")
+
+
+def sla_block_diag(*blocks: NDArray) -> NDArray:
+    import scipy.linalg as sla
+
+    return sla.block_diag(*blocks)

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .basis import SoftClipBasis
-from .neuro_adaptive import ObserverTrace
+from .trace import EstimateTrace as ObserverTrace
 
 __all__ = ["least_squares_weights", "regressors"]
 

@@ -1,0 +1,881 @@
+r"""Compiled core of the neuro-adaptive estimator: one loop for every measurement model.
+
+Model (SPEC §1-2 in body coordinates, exact for a time-varying speed). State
+``x = [vy, r, e1, e2]`` (:class:`~.model.StateIndex`): lateral velocity of the centre of
+gravity [m/s], yaw rate [rad/s] and, when a lane camera is used, the lateral offset [m]
+and heading error [rad] to the path. IMU-only estimation uses the first two only
+(``nx = 2``). Per row the inputs are the road-wheel steering ``delta`` [rad], the speed
+``vx`` [m/s] (with ``ax`` [m/s^2] inside the row) and the path curvature ``kappa`` [1/m]::
+
+    alpha_f = delta - (vy + lf r) / vx,      alpha_r = -(vy - lr r) / vx             (eq. 13)
+    F_i     = 2 C_i alpha_i + gamma_i sum_j W_ij sigma_ij(alpha_i)                   (eq. 14, 29)
+    vy_dot  = (F_f cos(delta) + F_r) / m - vx r
+    r_dot   = (lf F_f cos(delta) - lr F_r) / Iz
+    e1_dot  = vy + vx e2,                    e2_dot = r - vx kappa
+
+With ``vy = e1_dot - vx e2`` and ``r = e2_dot + vx kappa`` this is SPEC §1's error-state
+model (eqs. 1-8; ``cos(delta) = 1`` there). Measurement channels (NaN = not delivered):
+camera ``[e1, e2]`` (optionally ``latency`` seconds old), IMU ``[a_y, r]`` with
+``a_y = (F_f cos(delta) + F_r) / m`` (a feedthrough of the learned force) and optional
+sensor offsets appended to the weight vector.
+
+Per row: [camera frame: rewind to the instant it shows, correct there, replay to now]
+-> [IMU sample: correct] -> record -> predict to the next row (RK4 sub-steps of at most
+``h_max``; the sensitivity ``Upsilon = dx/dw`` and the state-error covariance ``Sigma``
+by the second-order transition of the linearisation).
+
+A correction with innovation ``nu = z - h(x, w)`` and regressor ``Psi = H Upsilon + D_w``:
+
+- causal mode: weights by recursive least squares with the full innovation covariance
+  ``Psi P_w Psi^T + H Sigma H^T + R``, projected on their box, then
+  ``x += Upsilon dw + L nu``, ``Upsilon <- Upsilon - L Psi``, Joseph update of ``Sigma``
+  with the certified gain ``L`` of the speed cell (:mod:`.gains`);
+- fixed mode (offline refinement): weights held, ``Psi^T S^-1 Psi``, ``Psi^T S^-1 nu``
+  and ``nu^T S^-1 nu`` accumulated for a Gauss-Newton step of the prediction-error fit
+  (:mod:`.offline`), and the per-row score ``Psi^T S^-1 nu`` stored for its covariance.
+
+Health (causal and fixed mode): the normalised innovation squared (NIS) over a sliding
+window of updates against a chi-square bound, the time since the last measurement, and
+the physical range of the state. Any trip freezes adaptation; entering a trip rolls the
+weights back to a checkpoint taken at least ``rollback_s`` earlier; the flag recovers once
+a fresh window is consistent again.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+# state layout (body states first, so an IMU-only estimator uses the prefix)
+VY, R, E1, E2 = 0, 1, 2, 3
+# measurement channels
+CH_E1, CH_E2, CH_AY, CH_R = 0, 1, 2, 3
+N_CHANNELS = 4
+GROUP_CAMERA, GROUP_IMU = 0, 1
+# health codes (trace.health)
+HEALTH_OK, HEALTH_SETTLING, HEALTH_NO_DATA, HEALTH_INCONSISTENT, HEALTH_DIVERGED, HEALTH_RECOVERING = range(6)
+HEALTH_NAMES = ("ok", "settling", "no_data", "inconsistent", "diverged", "recovering")
+# modes
+MODE_CAUSAL, MODE_FIXED = 0, 1
+# health state vector layout
+(HS_CODE, HS_LAST_MEAS, HS_TRIP_T, HS_SUM, HS_DOF, HS_COUNT, HS_HEAD, HS_LAST_CKPT, HS_N_CKPT,
+ HS_CKPT_HEAD, HS_TRIPS, HS_STARTED, HS_T0) = range(13)  # fmt: skip
+N_HS = 13
+# history meta: number of rows stored, head
+HM_COUNT, HM_HEAD = 0, 1
+V_FLOOR = 3.0  # [m/s]: speed floor of the slip angles (singular at standstill)
+_Z_CHI = 3.719  # standard normal quantile of 1 - 1e-4 (chi-square bound of the health test)
+
+
+class Model(NamedTuple):
+    """Vehicle and basis constants of a run (all SI)."""
+
+    veh: np.ndarray  # [m, Iz, lf, lr, 2 Cf, 2 Cr]
+    lo: np.ndarray  # (2, N) soft-clip lower bounds [rad]
+    hi: np.ndarray  # (2, N) upper bounds [rad]
+    off: np.ndarray  # (2, N) offsets subtracted from the activations [rad]
+    lam: float  # sharpness [1/rad]
+    gamma: np.ndarray  # (2,) scales [N/rad]
+    n_bias: int  # sensor offsets appended to w: 0, or 2 (a_y [m/s^2], yaw rate [rad/s])
+    wlo: np.ndarray  # (nw,) weight box
+    whi: np.ndarray  # (nw,)
+    nx: int  # 2 (IMU) or 4 (camera, fused)
+    q_force: np.ndarray  # (2,) force-error intensity front/rear [N^2 s]
+    h_max: float  # largest integration sub-step [s]
+
+
+class Gains(NamedTuple):
+    """Certified correction gains per speed cell."""
+
+    edges: np.ndarray  # (n_cells + 1,) speed cell edges [m/s]
+    L_cam: np.ndarray  # (n_cells, nx, 2) gain of the camera channels
+    L_imu: np.ndarray  # (n_cells, nx, 2) gain of the IMU channels
+
+
+class Settings(NamedTuple):
+    """Run settings."""
+
+    r_var: np.ndarray  # (4,) measurement noise variance of e1, e2, a_y, r
+    use_cam: bool
+    use_imu: bool
+    latency: float  # camera latency [s]
+    mode: int  # MODE_CAUSAL or MODE_FIXED
+    adapt: bool  # causal mode: learn the weights
+    q_w: float  # weight random-walk intensity [1/s] (variance per second)
+    p_max: float  # cap of each weight variance
+    settle_until: float  # no adaptation before this time [s]
+    gap_limit: float  # health: longest time without a measurement [s]
+    nis_factor: float  # health: window NIS may exceed the chi-square bound by this factor
+    rollback_s: float  # weights restored from a checkpoint at least this old [s]
+    gate: float  # fixed mode: updates with NIS above this are left out of the fit
+    accumulate_from: float  # fixed mode: accumulate from this time [s]
+    x0: np.ndarray  # (nx,) state after a divergence reset
+    sig0: np.ndarray  # (nx, nx) its covariance
+    dt_last: float  # prediction step after the last row [s]
+    store_weights: bool
+    store_scores: bool
+    compute_std: bool
+    kalman: bool  # correct with the Kalman gain Sigma H^T S^-1 instead of the certified gain
+
+
+class State(NamedTuple):
+    """Mutable estimator state (updated in place)."""
+
+    x: np.ndarray  # (nx,)
+    w: np.ndarray  # (nw,)
+    ups: np.ndarray  # (nx, nw) sensitivity dx/dw
+    sig: np.ndarray  # (nx, nx) state-error covariance at exact weights
+    pw: np.ndarray  # (nw, nw) weight covariance
+    hs: np.ndarray  # (N_HS,) health state
+    hring: np.ndarray  # (W, 2) NIS and dof of the last W updates
+    ck_t: np.ndarray  # (C,) checkpoint times
+    ck_w: np.ndarray  # (C, nw)
+    ck_pw: np.ndarray  # (C, nw, nw)
+    hist_t: np.ndarray  # (H,) history for delayed frames
+    hist_x: np.ndarray  # (H, nx)
+    hist_ups: np.ndarray  # (H, nx, nw)
+    hist_sig: np.ndarray  # (H, nx, nx)
+    hist_u: np.ndarray  # (H, 6) delta, vx, ax, kappa, z_ay, z_r
+    hist_meta: np.ndarray  # (2,) int64: count, head
+
+
+class Accumulator(NamedTuple):
+    """Normal equations of the prediction-error fit (fixed mode)."""
+
+    hess: np.ndarray  # (nw, nw) sum Psi^T S^-1 Psi
+    grad: np.ndarray  # (nw,) sum Psi^T S^-1 nu
+    stats: np.ndarray  # (4,) sum nu^T S^-1 nu, updates, dof, sum log det S
+
+
+class Outputs(NamedTuple):
+    x: np.ndarray  # (n, nx) posterior state
+    slip: np.ndarray  # (n, 2)
+    fnl: np.ndarray  # (n, 2) nonlinear (learned) axle force [N]
+    force: np.ndarray  # (n, 2) total axle force [N]
+    w: np.ndarray  # (n, nw) or (0, nw) when not stored
+    std: np.ndarray  # (n, nx) or (0, nx)
+    nu: np.ndarray  # (n, 4) innovations (NaN without measurement)
+    nis: np.ndarray  # (n,) NIS of the row's updates (NaN without)
+    health: np.ndarray  # (n,) int8
+    score: np.ndarray  # (n, nw) or (0, nw)
+
+
+# -- model ------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _softplus(x):
+    """``ln(1 + exp(x))``; exact to double precision without transcendentals for ``|x| > 37``."""
+    if x > 37.0:
+        return x
+    if x < -37.0:
+        return 0.0
+    return max(x, 0.0) + math.log1p(math.exp(-abs(x)))
+
+
+@njit(cache=True, inline="always")
+def _half_tanh(x):
+    """``tanh(x / 2)``, saturated (to double precision) beyond ``|x| > 40``."""
+    if x > 40.0:
+        return 1.0
+    if x < -40.0:
+        return -1.0
+    return math.tanh(0.5 * x)
+
+
+@njit(cache=True)
+def axle_basis(a, axle, M, w, phi, dphi):
+    """Activations ``gamma sigma`` (eq. 30) into ``phi[axle N : (axle+1) N]``, their slopes into
+    ``dphi``; returns ``(f, df/da)`` of the learned part of the axle force."""
+    N = M.lo.shape[1]
+    lam = M.lam
+    g = M.gamma[axle]
+    f = 0.0
+    k = 0.0
+    for j in range(N):
+        lo = M.lo[axle, j]
+        hi = M.hi[axle, j]
+        s = a + (_softplus(-lam * (a - lo)) - _softplus(lam * (a - hi))) / lam - M.off[axle, j]
+        d = 0.5 * (_half_tanh(lam * (a - lo)) - _half_tanh(lam * (a - hi)))
+        i = axle * N + j
+        phi[i] = g * s
+        dphi[i] = g * d
+        f += phi[i] * w[i]
+        k += dphi[i] * w[i]
+    return f, k
+
+
+@njit(cache=True)
+def slip_angles(vy, r, delta, vx, lf, lr):
+    """Front and rear slip angles [rad] (eq. 13, body form); ``vx`` floored at ``V_FLOOR``."""
+    v = vx if vx > V_FLOOR else V_FLOOR
+    return delta - (vy + lf * r) / v, -(vy - lr * r) / v
+
+
+@njit(cache=True)
+def forces(vy, r, delta, vx, w, M, phi, dphi):
+    """``(alpha_f, alpha_r, F_f, F_r, f_f, f_r, k_f, k_r)``: slips, total and learned axle
+    forces [N] and total slopes [N/rad]; fills ``phi``/``dphi`` (eqs. 13, 14, 29)."""
+    af, ar = slip_angles(vy, r, delta, vx, M.veh[2], M.veh[3])
+    ff, kf = axle_basis(af, 0, M, w, phi, dphi)
+    fr, kr = axle_basis(ar, 1, M, w, phi, dphi)
+    return af, ar, M.veh[4] * af + ff, M.veh[5] * ar + fr, ff, fr, M.veh[4] + kf, M.veh[5] + kr
+
+
+@njit(cache=True)
+def _rhs(x, delta, cd, vx, kappa, w, M, phi, dphi, out):
+    """``out = x_dot``; returns the total slopes ``(k_f, k_r)`` at ``x``."""
+    m, Iz, lf, lr = M.veh[0], M.veh[1], M.veh[2], M.veh[3]
+    v = vx if vx > V_FLOOR else V_FLOOR
+    _, _, Ff, Fr, _, _, kf, kr = forces(x[VY], x[R], delta, v, w, M, phi, dphi)
+    out[VY] = (Ff * cd + Fr) / m - v * x[R]
+    out[R] = (lf * Ff * cd - lr * Fr) / Iz
+    if M.nx == 4:
+        out[E1] = x[VY] + v * x[E2]
+        out[E2] = x[R] - v * kappa
+    return kf, kr
+
+
+@njit(cache=True)
+def _jacobian(cd, vx, kf, kr, M, J):
+    """``J = d x_dot / d x`` at total slopes ``k_f``, ``k_r``."""
+    m, Iz, lf, lr = M.veh[0], M.veh[1], M.veh[2], M.veh[3]
+    v = vx if vx > V_FLOOR else V_FLOOR
+    J[:, :] = 0.0
+    J[VY, VY] = -(kf * cd + kr) / (m * v)
+    J[VY, R] = -(kf * cd * lf - kr * lr) / (m * v) - v
+    J[R, VY] = -(lf * kf * cd - lr * kr) / (Iz * v)
+    J[R, R] = -(lf * lf * kf * cd + lr * lr * kr) / (Iz * v)
+    if M.nx == 4:
+        J[E1, VY] = 1.0
+        J[E1, E2] = v
+        J[E2, R] = 1.0
+
+
+class _Work(NamedTuple):
+    phi: np.ndarray  # (nw,)
+    dphi: np.ndarray
+    k1: np.ndarray  # (nx,)
+    k2: np.ndarray
+    k3: np.ndarray
+    k4: np.ndarray
+    y: np.ndarray
+    J: np.ndarray  # (nx, nx)
+    Phi: np.ndarray
+    Gm: np.ndarray
+    T1: np.ndarray  # (nx, nx)
+    U: np.ndarray  # (nx, nw)
+    H: np.ndarray  # (2, nx)
+    Dw: np.ndarray  # (2, nw)
+    Psi: np.ndarray  # (2, nw)
+    PsiP: np.ndarray  # (2, nw)
+    Kw: np.ndarray  # (nw, 2)
+    dw: np.ndarray  # (nw,)
+    Lk: np.ndarray  # (nx, 2) Kalman gain
+
+
+def make_work(nx: int, nw: int) -> _Work:
+    e = np.empty
+    return _Work(e(nw), e(nw), e(nx), e(nx), e(nx), e(nx), e(nx), e((nx, nx)), e((nx, nx)), e((nx, nx)),
+                 e((nx, nx)), e((nx, nw)), e((2, nx)), e((2, nw)), e((2, nw)), e((2, nw)), e((nw, 2)), e(nw), e((nx, 2)))  # fmt: skip
+
+
+@njit(cache=True)
+def predict(st, dt, delta, vx0, ax, kappa, M, S, wk):
+    """Advance ``x``, ``Upsilon``, ``Sigma`` (and the weight random walk) by ``dt`` [s] with the
+    inputs held (speed ramps with ``ax``)."""
+    if dt <= 0.0:
+        return
+    nx = M.nx
+    nw = st.w.shape[0]
+    N2 = 2 * M.lo.shape[1]
+    m, Iz, lf, lr = M.veh[0], M.veh[1], M.veh[2], M.veh[3]
+    n_sub = int(math.ceil(dt / M.h_max - 1e-9))
+    if n_sub < 1:
+        n_sub = 1
+    h = dt / n_sub
+    cd = math.cos(delta)
+    x = st.x
+    for s in range(n_sub):
+        v0 = vx0 + ax * s * h
+        vm = v0 + 0.5 * h * ax
+        v1 = v0 + h * ax
+        kf, kr = _rhs(x, delta, cd, v0, kappa, st.w, M, wk.phi, wk.dphi, wk.k1)
+        # linearised transition over the sub-step: Phi = I + hJ + (hJ)^2/2, Gm = h (I + hJ/2)
+        _jacobian(cd, v0, kf, kr, M, wk.J)
+        for i in range(nx):
+            for j in range(nx):
+                acc = 0.0
+                for q in range(nx):
+                    acc += wk.J[i, q] * wk.J[q, j]
+                wk.Phi[i, j] = h * wk.J[i, j] + 0.5 * h * h * acc
+                wk.Gm[i, j] = 0.5 * h * h * wk.J[i, j]
+            wk.Phi[i, i] += 1.0
+            wk.Gm[i, i] += h
+        # Upsilon <- Phi Upsilon + Gm B_w (B_w: force input of each weight)
+        ev0f, ev1f = cd / m, lf * cd / Iz
+        ev0r, ev1r = 1.0 / m, -lr / Iz
+        for a in range(nw):
+            if a < N2:
+                if a < N2 // 2:
+                    b0 = ev0f * wk.phi[a]
+                    b1 = ev1f * wk.phi[a]
+                else:
+                    b0 = ev0r * wk.phi[a]
+                    b1 = ev1r * wk.phi[a]
+            else:
+                b0 = 0.0
+                b1 = 0.0
+            for i in range(nx):
+                acc = wk.Gm[i, VY] * b0 + wk.Gm[i, R] * b1
+                for q in range(nx):
+                    acc += wk.Phi[i, q] * st.ups[q, a]
+                wk.U[i, a] = acc
+        for i in range(nx):
+            for a in range(nw):
+                st.ups[i, a] = wk.U[i, a]
+        # Sigma <- Phi Sigma Phi^T + h Q (force-error intensity on both axles)
+        for i in range(nx):
+            for j in range(nx):
+                acc = 0.0
+                for q in range(nx):
+                    acc += wk.Phi[i, q] * st.sig[q, j]
+                wk.T1[i, j] = acc
+        for i in range(nx):
+            for j in range(nx):
+                acc = 0.0
+                for q in range(nx):
+                    acc += wk.T1[i, q] * wk.Phi[j, q]
+                st.sig[i, j] = acc
+        qf, qr = M.q_force[0] * h, M.q_force[1] * h
+        st.sig[VY, VY] += qf * ev0f * ev0f + qr * ev0r * ev0r
+        st.sig[VY, R] += qf * ev0f * ev1f + qr * ev0r * ev1r
+        st.sig[R, VY] += qf * ev0f * ev1f + qr * ev0r * ev1r
+        st.sig[R, R] += qf * ev1f * ev1f + qr * ev1r * ev1r
+        # RK4 of the state (the speed ramps within the sub-step)
+        for i in range(nx):
+            wk.y[i] = x[i] + 0.5 * h * wk.k1[i]
+        _rhs(wk.y, delta, cd, vm, kappa, st.w, M, wk.phi, wk.dphi, wk.k2)
+        for i in range(nx):
+            wk.y[i] = x[i] + 0.5 * h * wk.k2[i]
+        _rhs(wk.y, delta, cd, vm, kappa, st.w, M, wk.phi, wk.dphi, wk.k3)
+        for i in range(nx):
+            wk.y[i] = x[i] + h * wk.k3[i]
+        _rhs(wk.y, delta, cd, v1, kappa, st.w, M, wk.phi, wk.dphi, wk.k4)
+        for i in range(nx):
+            x[i] += h / 6.0 * (wk.k1[i] + 2.0 * wk.k2[i] + 2.0 * wk.k3[i] + wk.k4[i])
+    if S.mode == MODE_CAUSAL and S.adapt and S.q_w > 0.0:
+        for a in range(nw):
+            st.pw[a, a] += S.q_w * dt
+
+
+# -- corrections ------------------------------------------------------------------------------
+@njit(cache=True)
+def _cell(edges, vx):
+    n = edges.shape[0] - 1
+    c = 0
+    while c < n - 1 and vx >= edges[c + 1]:
+        c += 1
+    return c
+
+
+@njit(cache=True)
+def _measurement(group, st, delta, vx, M, S, zk, wk):
+    """Innovation, ``H`` (2, nx), ``D_w`` (2, nw), ``Psi`` and present flags of a channel group.
+
+    Returns ``(nu0, nu1, p0, p1)``; absent channels have zero rows.
+    """
+    nx = M.nx
+    nw = st.w.shape[0]
+    N2 = 2 * M.lo.shape[1]
+    c0 = CH_E1 if group == GROUP_CAMERA else CH_AY
+    z0 = zk[c0]
+    z1 = zk[c0 + 1]
+    p0 = z0 == z0
+    p1 = z1 == z1
+    wk.H[:, :] = 0.0
+    wk.Dw[:, :] = 0.0
+    x = st.x
+    if group == GROUP_CAMERA:
+        h0 = x[E1]
+        h1 = x[E2]
+        wk.H[0, E1] = 1.0
+        wk.H[1, E2] = 1.0
+    else:
+        m, lf, lr = M.veh[0], M.veh[2], M.veh[3]
+        v = vx if vx > V_FLOOR else V_FLOOR
+        cd = math.cos(delta)
+        _, _, Ff, Fr, _, _, kf, kr = forces(x[VY], x[R], delta, v, st.w, M, wk.phi, wk.dphi)
+        h0 = (Ff * cd + Fr) / m
+        h1 = x[R]
+        wk.H[0, VY] = -(kf * cd + kr) / (m * v)
+        wk.H[0, R] = -(kf * cd * lf - kr * lr) / (m * v)
+        wk.H[1, R] = 1.0
+        for a in range(N2):
+            wk.Dw[0, a] = (cd * wk.phi[a] if a < N2 // 2 else wk.phi[a]) / m
+        if M.n_bias == 2:
+            h0 += st.w[N2]
+            h1 += st.w[N2 + 1]
+            wk.Dw[0, N2] = 1.0
+            wk.Dw[1, N2 + 1] = 1.0
+    nu0 = z0 - h0 if p0 else 0.0
+    nu1 = z1 - h1 if p1 else 0.0
+    for c in range(2):
+        present = p0 if c == 0 else p1
+        for a in range(nw):
+            if present:
+                acc = wk.Dw[c, a]
+                for i in range(nx):
+                    acc += wk.H[c, i] * st.ups[i, a]
+                wk.Psi[c, a] = acc
+            else:
+                wk.Psi[c, a] = 0.0
+        if not present:
+            for i in range(nx):
+                wk.H[c, i] = 0.0
+    return nu0, nu1, p0, p1
+
+
+@njit(cache=True)
+def _inv2(s00, s01, s11):
+    det = s00 * s11 - s01 * s01
+    if not det > 0.0:
+        det = 1e-300
+    return s11 / det, -s01 / det, s00 / det
+
+
+@njit(cache=True)
+def update(group, st, delta, vx, zk, M, G, S, adapt, accumulate, acc, score, k, wk):
+    """Correct with the channel group's measurement at the current instant.
+
+    Returns ``(nis, dof, nu0, nu1)``: the NIS and the innovation before the correction
+    (``dof = 0``: nothing measured). ``adapt``: learn the weights (causal mode);
+    ``accumulate``: add to the fit's normal equations (fixed mode).
+    """
+    nx = M.nx
+    nw = st.w.shape[0]
+    c0 = CH_E1 if group == GROUP_CAMERA else CH_AY
+    nu0, nu1, p0, p1 = _measurement(group, st, delta, vx, M, S, zk, wk)
+    dof = (1 if p0 else 0) + (1 if p1 else 0)
+    if dof == 0:
+        return 0.0, 0, np.nan, np.nan
+    r0 = S.r_var[c0] if p0 else 0.0
+    r1 = S.r_var[c0 + 1] if p1 else 0.0
+    # state-error part of the innovation covariance: H Sigma H^T + R
+    sx00 = r0
+    sx01 = 0.0
+    sx11 = r1
+    for i in range(nx):
+        for j in range(nx):
+            sx00 += wk.H[0, i] * st.sig[i, j] * wk.H[0, j]
+            sx01 += wk.H[0, i] * st.sig[i, j] * wk.H[1, j]
+            sx11 += wk.H[1, i] * st.sig[i, j] * wk.H[1, j]
+    if not p0:
+        sx00 = 1.0
+        sx01 = 0.0
+    if not p1:
+        sx11 = 1.0
+        sx01 = 0.0
+    # weight part: Psi P_w Psi^T
+    for c in range(2):
+        for b in range(nw):
+            acc_ = 0.0
+            for a in range(nw):
+                acc_ += wk.Psi[c, a] * st.pw[a, b]
+            wk.PsiP[c, b] = acc_
+    sw00 = 0.0
+    sw01 = 0.0
+    sw11 = 0.0
+    for a in range(nw):
+        sw00 += wk.PsiP[0, a] * wk.Psi[0, a]
+        sw01 += wk.PsiP[0, a] * wk.Psi[1, a]
+        sw11 += wk.PsiP[1, a] * wk.Psi[1, a]
+    i00, i01, i11 = _inv2(sx00 + sw00, sx01 + sw01, sx11 + sw11)
+    nis = nu0 * nu0 * i00 + 2.0 * nu0 * nu1 * i01 + nu1 * nu1 * i11
+    nu0_prior = nu0 if p0 else np.nan
+    nu1_prior = nu1 if p1 else np.nan
+    if accumulate and nis <= S.gate * dof:
+        j00, j01, j11 = _inv2(sx00, sx01, sx11)
+        # S^-1 Psi and S^-1 nu
+        for a in range(nw):
+            q0 = j00 * wk.Psi[0, a] + j01 * wk.Psi[1, a]
+            q1 = j01 * wk.Psi[0, a] + j11 * wk.Psi[1, a]
+            for b in range(a, nw):
+                v_ = q0 * wk.Psi[0, b] + q1 * wk.Psi[1, b]
+                acc.hess[a, b] += v_
+                if b != a:
+                    acc.hess[b, a] += v_
+            sc = q0 * nu0 + q1 * nu1
+            acc.grad[a] += sc
+            if S.store_scores:
+                score[k, a] += sc
+        acc.stats[0] += nu0 * nu0 * j00 + 2.0 * nu0 * nu1 * j01 + nu1 * nu1 * j11
+        acc.stats[1] += 1.0
+        acc.stats[2] += dof
+        acc.stats[3] += math.log(max(sx00 * sx11 - sx01 * sx01, 1e-300))
+    if adapt:
+        # RLS: K_w = P_w Psi^T (S_x + S_w)^-1, projected step, covariance update
+        for a in range(nw):
+            wk.Kw[a, 0] = wk.PsiP[0, a] * i00 + wk.PsiP[1, a] * i01
+            wk.Kw[a, 1] = wk.PsiP[0, a] * i01 + wk.PsiP[1, a] * i11
+        moved = False
+        for a in range(nw):
+            wn = st.w[a] + wk.Kw[a, 0] * nu0 + wk.Kw[a, 1] * nu1
+            if wn > M.whi[a]:
+                wn = M.whi[a]
+            elif wn < M.wlo[a]:
+                wn = M.wlo[a]
+            wk.dw[a] = wn - st.w[a]
+            if wk.dw[a] != 0.0:
+                moved = True
+            st.w[a] = wn
+        for a in range(nw):
+            for b in range(nw):
+                st.pw[a, b] -= wk.Kw[a, 0] * wk.PsiP[0, b] + wk.Kw[a, 1] * wk.PsiP[1, b]
+        for a in range(nw):
+            if st.pw[a, a] > S.p_max:
+                sc_ = math.sqrt(S.p_max / st.pw[a, a])
+                for b in range(nw):
+                    st.pw[a, b] *= sc_
+                    st.pw[b, a] *= sc_
+        if moved:
+            for i in range(nx):
+                a_ = 0.0
+                for a in range(nw):
+                    a_ += st.ups[i, a] * wk.dw[a]
+                st.x[i] += a_
+            nu0, nu1, p0, p1 = _measurement(group, st, delta, vx, M, S, zk, wk)
+    # state correction: the certified gain of the speed cell, or the Kalman gain
+    if S.kalman:
+        L = wk.Lk
+        j00, j01, j11 = _inv2(sx00, sx01, sx11)
+        for i in range(nx):
+            a0 = 0.0
+            a1 = 0.0
+            for q in range(nx):
+                a0 += st.sig[i, q] * wk.H[0, q]
+                a1 += st.sig[i, q] * wk.H[1, q]
+            L[i, 0] = a0 * j00 + a1 * j01 if p0 else 0.0
+            L[i, 1] = a0 * j01 + a1 * j11 if p1 else 0.0
+    else:
+        c = _cell(G.edges, vx)
+        L = G.L_cam[c] if group == GROUP_CAMERA else G.L_imu[c]
+    for i in range(nx):
+        st.x[i] += L[i, 0] * nu0 + L[i, 1] * nu1
+    for a in range(nw):
+        q0 = wk.Psi[0, a]
+        q1 = wk.Psi[1, a]
+        for i in range(nx):
+            st.ups[i, a] -= L[i, 0] * q0 + L[i, 1] * q1
+    # Joseph form: Sigma = (I - L H) Sigma (I - L H)^T + L R L^T
+    for i in range(nx):
+        for j in range(nx):
+            wk.T1[i, j] = (1.0 if i == j else 0.0) - L[i, 0] * wk.H[0, j] - L[i, 1] * wk.H[1, j]
+    for i in range(nx):
+        for j in range(nx):
+            a_ = 0.0
+            for q in range(nx):
+                a_ += wk.T1[i, q] * st.sig[q, j]
+            wk.Phi[i, j] = a_
+    for i in range(nx):
+        for j in range(nx):
+            a_ = L[i, 0] * r0 * L[j, 0] + L[i, 1] * r1 * L[j, 1]
+            for q in range(nx):
+                a_ += wk.Phi[i, q] * wk.T1[j, q]
+            st.sig[i, j] = a_
+    return nis, dof, nu0_prior, nu1_prior
+
+
+# -- health -----------------------------------------------------------------------------------
+@njit(cache=True)
+def _chi2_upper(dof):
+    """Wilson-Hilferty upper quantile (1 - 1e-4) of chi-square with ``dof`` degrees of freedom."""
+    d = max(dof, 1.0)
+    c = 2.0 / (9.0 * d)
+    return d * (1.0 - c + _Z_CHI * math.sqrt(c)) ** 3
+
+
+@njit(cache=True)
+def _save_checkpoint(st, t):
+    C = st.ck_t.shape[0]
+    h = int(st.hs[HS_CKPT_HEAD])
+    st.ck_t[h] = t
+    for a in range(st.w.shape[0]):
+        st.ck_w[h, a] = st.w[a]
+        for b in range(st.w.shape[0]):
+            st.ck_pw[h, a, b] = st.pw[a, b]
+    st.hs[HS_CKPT_HEAD] = (h + 1) % C
+    st.hs[HS_N_CKPT] = min(st.hs[HS_N_CKPT] + 1.0, float(C))
+    st.hs[HS_LAST_CKPT] = t
+
+
+@njit(cache=True)
+def _rollback(st, t, S, M):
+    """Restore the newest checkpoint at least ``rollback_s`` old (the oldest if none is)."""
+    n = int(st.hs[HS_N_CKPT])
+    if n == 0:
+        return
+    C = st.ck_t.shape[0]
+    best = -1
+    oldest = -1
+    for q in range(n):
+        i = (int(st.hs[HS_CKPT_HEAD]) - 1 - q) % C
+        oldest = i
+        if st.ck_t[i] <= t - S.rollback_s and best < 0:
+            best = i
+    if best < 0:
+        best = oldest
+    nw = st.w.shape[0]
+    for a in range(nw):
+        d = st.ck_w[best, a] - st.w[a]
+        for i in range(M.nx):
+            st.x[i] += st.ups[i, a] * d
+        st.w[a] = st.ck_w[best, a]
+        for b in range(nw):
+            st.pw[a, b] = st.ck_pw[best, a, b]
+
+
+@njit(cache=True)
+def _trip(st, t, code, S, M):
+    if st.hs[HS_CODE] == HEALTH_OK and S.mode == MODE_CAUSAL and S.adapt:
+        _rollback(st, t, S, M)
+    if st.hs[HS_CODE] == HEALTH_OK or st.hs[HS_CODE] == HEALTH_SETTLING:
+        st.hs[HS_TRIPS] += 1.0
+    st.hs[HS_CODE] = code
+    st.hs[HS_TRIP_T] = t
+    st.hs[HS_SUM] = 0.0
+    st.hs[HS_DOF] = 0.0
+    st.hs[HS_COUNT] = 0.0
+    st.hs[HS_HEAD] = 0.0
+
+
+@njit(cache=True)
+def _health_push(st, t, nis, dof, S, M):
+    """Add an update's NIS to the window and re-evaluate the flag."""
+    W = st.hring.shape[0]
+    h = int(st.hs[HS_HEAD])
+    if st.hs[HS_COUNT] >= W:
+        st.hs[HS_SUM] -= st.hring[h, 0]
+        st.hs[HS_DOF] -= st.hring[h, 1]
+    else:
+        st.hs[HS_COUNT] += 1.0
+    st.hring[h, 0] = nis
+    st.hring[h, 1] = dof
+    st.hs[HS_SUM] += nis
+    st.hs[HS_DOF] += dof
+    st.hs[HS_HEAD] = (h + 1) % W
+    st.hs[HS_LAST_MEAS] = t
+    full = st.hs[HS_COUNT] >= W
+    bound = S.nis_factor * _chi2_upper(st.hs[HS_DOF])
+    code = st.hs[HS_CODE]
+    if full and st.hs[HS_SUM] > bound:
+        if code != HEALTH_INCONSISTENT:
+            _trip(st, t, HEALTH_INCONSISTENT, S, M)
+        return
+    if code == HEALTH_SETTLING:
+        if t >= S.settle_until:
+            st.hs[HS_CODE] = HEALTH_OK
+    elif code != HEALTH_OK:
+        if code == HEALTH_NO_DATA or code == HEALTH_DIVERGED:
+            st.hs[HS_CODE] = HEALTH_RECOVERING
+        elif full:
+            st.hs[HS_CODE] = HEALTH_OK
+
+
+@njit(cache=True)
+def _health_tick(st, t, S, M):
+    """Per-row checks: data gap, divergence, checkpoints."""
+    if st.hs[HS_STARTED] == 0.0:
+        st.hs[HS_STARTED] = 1.0
+        st.hs[HS_T0] = t
+        st.hs[HS_LAST_MEAS] = t
+        st.hs[HS_LAST_CKPT] = -1e300
+    code = st.hs[HS_CODE]
+    if t - st.hs[HS_LAST_MEAS] > S.gap_limit and code != HEALTH_NO_DATA:
+        _trip(st, t, HEALTH_NO_DATA, S, M)
+    ok = True
+    for i in range(M.nx):
+        if not math.isfinite(st.x[i]):
+            ok = False
+    if ok and (abs(st.x[VY]) > 20.0 or abs(st.x[R]) > 5.0):
+        ok = False
+    if not ok:
+        _trip(st, t, HEALTH_DIVERGED, S, M)
+        for i in range(M.nx):
+            st.x[i] = S.x0[i]
+            for a in range(st.w.shape[0]):
+                st.ups[i, a] = 0.0
+            for j in range(M.nx):
+                st.sig[i, j] = S.sig0[i, j]
+    if st.hs[HS_CODE] == HEALTH_OK and t - st.hs[HS_LAST_CKPT] >= 0.5 * S.rollback_s:
+        _save_checkpoint(st, t)
+
+
+# -- delayed camera frames --------------------------------------------------------------------
+# History slots are addressed by a running row counter (hist_meta[HM_HEAD] = rows pushed so
+# far, across calls), stored at ``slot % H``; the row being processed is ``HEAD - 1``.
+@njit(cache=True)
+def _store_state(st, slot):
+    i = slot % st.hist_t.shape[0]
+    for a in range(st.x.shape[0]):
+        st.hist_x[i, a] = st.x[a]
+        for b in range(st.w.shape[0]):
+            st.hist_ups[i, a, b] = st.ups[a, b]
+        for b in range(st.x.shape[0]):
+            st.hist_sig[i, a, b] = st.sig[a, b]
+
+
+@njit(cache=True)
+def _push_history(st, t, delta, vx, ax, kappa, zk):
+    """Store the prior and the inputs of the row being processed; advance the counter."""
+    H = st.hist_t.shape[0]
+    slot = int(st.hist_meta[HM_HEAD])
+    i = slot % H
+    st.hist_t[i] = t
+    st.hist_u[i, 0] = delta
+    st.hist_u[i, 1] = vx
+    st.hist_u[i, 2] = ax
+    st.hist_u[i, 3] = kappa
+    st.hist_u[i, 4] = zk[CH_AY]
+    st.hist_u[i, 5] = zk[CH_R]
+    _store_state(st, slot)
+    st.hist_meta[HM_HEAD] = slot + 1
+    st.hist_meta[HM_COUNT] = min(st.hist_meta[HM_COUNT] + 1, H)
+
+
+@njit(cache=True)
+def _restore_state(st, slot):
+    i = slot % st.hist_t.shape[0]
+    for a in range(st.x.shape[0]):
+        st.x[a] = st.hist_x[i, a]
+        for b in range(st.w.shape[0]):
+            st.ups[a, b] = st.hist_ups[i, a, b]
+        for b in range(st.x.shape[0]):
+            st.sig[a, b] = st.hist_sig[i, a, b]
+
+
+@njit(cache=True)
+def _stored_imu(st, slot, zrow):
+    i = slot % st.hist_t.shape[0]
+    zrow[CH_E1] = np.nan
+    zrow[CH_E2] = np.nan
+    zrow[CH_AY] = st.hist_u[i, 4]
+    zrow[CH_R] = st.hist_u[i, 5]
+
+
+@njit(cache=True)
+def delayed_camera(st, zk, M, G, S, adapt, accumulate, acc, score, k, wk, zrow):
+    """Correct with a frame that shows the instant ``t_now - latency`` (out-of-sequence update).
+
+    Rewinds to the stored prior of the newest row at or before that instant, replays that
+    row's IMU correction, predicts to the instant, corrects there (learning as usual), and
+    replays the rows since (IMU corrections without learning, predictions with the new
+    weights), rewriting their stored priors. Returns what :func:`update` returns.
+    """
+    H = st.hist_t.shape[0]
+    now = int(st.hist_meta[HM_HEAD]) - 1
+    oldest = now - int(st.hist_meta[HM_COUNT]) + 1
+    tau = st.hist_t[now % H] - S.latency
+    j = now
+    while j > oldest and st.hist_t[j % H] > tau:
+        j -= 1
+    sj = j % H
+    _restore_state(st, j)
+    d, v, a, kap = st.hist_u[sj, 0], st.hist_u[sj, 1], st.hist_u[sj, 2], st.hist_u[sj, 3]
+    if S.use_imu:
+        _stored_imu(st, j, zrow)
+        update(GROUP_IMU, st, d, v, zrow, M, G, S, False, False, acc, score, k, wk)
+    dtp = max(tau - st.hist_t[sj], 0.0)
+    predict(st, dtp, d, v, a, kap, M, S, wk)
+    res = update(GROUP_CAMERA, st, d, v + a * dtp, zk, M, G, S, adapt, accumulate, acc, score, k, wk)
+    if j == now:
+        return res
+    predict(st, st.hist_t[(j + 1) % H] - st.hist_t[sj] - dtp, d, v + a * dtp, a, kap, M, S, wk)
+    for i in range(j + 1, now):
+        si = i % H
+        _store_state(st, i)
+        if S.use_imu:
+            _stored_imu(st, i, zrow)
+            update(GROUP_IMU, st, st.hist_u[si, 0], st.hist_u[si, 1], zrow, M, G, S, False, False, acc, score, k, wk)
+        predict(st, st.hist_t[(i + 1) % H] - st.hist_t[si], st.hist_u[si, 0], st.hist_u[si, 1], st.hist_u[si, 2],
+                st.hist_u[si, 3], M, S, wk)  # fmt: skip
+    _store_state(st, now)
+    return res
+
+
+# -- the loop ---------------------------------------------------------------------------------
+@njit(cache=True)
+def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last):
+    """Process all rows (module docstring); state, health and accumulators are updated in place."""
+    n = t.shape[0]
+    nx = M.nx
+    nw = st.w.shape[0]
+    zrow = np.empty(N_CHANNELS)
+    zk = np.empty(N_CHANNELS)
+    delayed = S.use_cam and S.latency > 0.0
+    causal = S.mode == MODE_CAUSAL
+    for k in range(n):
+        tk = t[k]
+        for c in range(N_CHANNELS):
+            zk[c] = z[k, c]
+            out.nu[k, c] = np.nan
+        if delayed:
+            _push_history(st, tk, delta[k], vx[k], ax[k], kappa[k], zk)
+        accumulate = S.mode == MODE_FIXED and tk >= S.accumulate_from
+        nis_row = 0.0
+        dof_row = 0
+        if S.use_cam and (zk[CH_E1] == zk[CH_E1] or zk[CH_E2] == zk[CH_E2]):
+            adapt_now = causal and S.adapt and st.hs[HS_CODE] == HEALTH_OK and tk >= S.settle_until
+            if delayed:
+                nis, dof, n0, n1 = delayed_camera(st, zk, M, G, S, adapt_now, accumulate, acc, out.score, k, wk, zrow)
+            else:
+                nis, dof, n0, n1 = update(GROUP_CAMERA, st, delta[k], vx[k], zk, M, G, S, adapt_now, accumulate, acc,
+                                          out.score, k, wk)  # fmt: skip
+            if dof > 0:
+                out.nu[k, CH_E1] = n0
+                out.nu[k, CH_E2] = n1
+                nis_row += nis
+                dof_row += dof
+                _health_push(st, tk, nis, dof, S, M)
+        if S.use_imu and (zk[CH_AY] == zk[CH_AY] or zk[CH_R] == zk[CH_R]):
+            adapt_now = causal and S.adapt and st.hs[HS_CODE] == HEALTH_OK and tk >= S.settle_until
+            nis, dof, n0, n1 = update(GROUP_IMU, st, delta[k], vx[k], zk, M, G, S, adapt_now, accumulate, acc,
+                                      out.score, k, wk)  # fmt: skip
+            if dof > 0:
+                out.nu[k, CH_AY] = n0
+                out.nu[k, CH_R] = n1
+                nis_row += nis
+                dof_row += dof
+                _health_push(st, tk, nis, dof, S, M)
+        _health_tick(st, tk, S, M)
+        # record the posterior
+        af, ar, Ff, Fr, ff, fr, _, _ = forces(st.x[VY], st.x[R], delta[k], vx[k], st.w, M, wk.phi, wk.dphi)
+        for i in range(nx):
+            out.x[k, i] = st.x[i]
+        out.slip[k, 0] = af
+        out.slip[k, 1] = ar
+        out.fnl[k, 0] = ff
+        out.fnl[k, 1] = fr
+        out.force[k, 0] = Ff
+        out.force[k, 1] = Fr
+        out.nis[k] = nis_row if dof_row > 0 else np.nan
+        out.health[k] = int(st.hs[HS_CODE])
+        if S.store_weights:
+            for a in range(nw):
+                out.w[k, a] = st.w[a]
+        if S.compute_std:
+            for i in range(nx):
+                var = st.sig[i, i]
+                for a in range(nw):
+                    ua = st.ups[i, a]
+                    if ua != 0.0:
+                        row = 0.0
+                        for b in range(nw):
+                            row += st.pw[a, b] * st.ups[i, b]
+                        var += ua * row
+                out.std[k, i] = math.sqrt(max(var, 0.0))
+        if k < n - 1:
+            predict(st, t[k + 1] - tk, delta[k], vx[k], ax[k], kappa[k], M, S, wk)
+        elif predict_last:
+            predict(st, S.dt_last, delta[k], vx[k], ax[k], kappa[k], M, S, wk)

@@ -1,0 +1,374 @@
+r"""Offline refinement: when the whole log is there, use all of it.
+
+The causal observer learns the weights on line, one measurement at a time, from a prior.
+Offline, the same observer (same model, same certified gains) is a one-step-ahead
+predictor of every measurement, and the weights that make its innovations smallest over
+the whole log are found by a prediction-error fit (Ljung, *System Identification*, ch. 7):
+
+    w* = argmin_w  sum_k nu_k(w)^T S_k^-1 nu_k(w) + (w - w_0)^T Lambda_0 (w - w_0)
+
+with ``S_k = H Sigma H^T + R`` the innovation covariance at exact weights and ``Lambda_0`` the
+prior precision (the smooth-curve prior of the causal observer, which only matters where
+the driving did not excite the tires). The gradient is exact and cheap: the observer
+already propagates ``Upsilon = dx/dw``, and ``d nu / dw = -Psi = -(H Upsilon + D_w)``.
+Levenberg-Marquardt-damped Gauss-Newton steps from the causal end weights converge in a few
+passes over the log (:func:`refine`).
+
+Uncertainty (:class:`OfflineFit`). The curve and the stiffness are linear functionals
+``g^T w`` of the weights. Their variance is the sandwich ``g^T A^-1 G A^-1 g`` with
+``A = Psi^T S^-1 Psi + Lambda_0`` and ``G`` the long-run covariance of the scores
+``s_k = Psi_k^T S_k^-1 nu_k`` (Newey-West, Bartlett weights, bandwidth from the scores' own
+autocorrelation): innovations of a fixed-gain observer are not white, and with model
+mismatch they are larger and slower than ``S`` says; the sandwich accounts for both,
+where ``A^-1`` alone would be over-confident. The prior's own share is kept unscaled.
+
+Verdict. The stiffness is *identified* when its two-sigma band is within
+``identifiable_rel_2sigma`` of the value; otherwise it is reported as not identifiable (a
+straight road, a drive that never loads the tires) and no number is printed as the answer.
+The *learned slip range* of each axle is where the curve's two-sigma band is within
+``curve_rel_2sigma`` of the force, inside the slip the drive covered.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import _kernel as K
+from .neuro_adaptive import NeuroAdaptiveObserver, axle_index
+from .trace import EstimateTrace
+
+__all__ = ["OfflineFit", "refine", "stiffness_gradient", "curve_gradient", "newey_west_variance"]
+
+
+def stiffness_gradient(observer: NeuroAdaptiveObserver, axle: int) -> NDArray:
+    """``g`` with per-tire stiffness ``= C_nominal + g^T w`` (half the slope at zero slip)."""
+    b = observer.basis
+    N = b.n_per_axle
+    g = np.zeros(observer.n_weights)
+    g[axle * N : (axle + 1) * N] = 0.5 * b.scale[axle] * b.slopes(0.0, axle)
+    return g
+
+
+def curve_gradient(observer: NeuroAdaptiveObserver, alpha: ArrayLike, axle: int) -> NDArray:
+    """Rows ``g(alpha)`` with axle force ``F(alpha) = 2 C alpha + g(alpha)^T w`` [N], shape (n, nw)."""
+    b = observer.basis
+    N = b.n_per_axle
+    a = np.atleast_1d(np.asarray(alpha, dtype=float))
+    G = np.zeros((len(a), observer.n_weights))
+    G[:, axle * N : (axle + 1) * N] = b.scale[axle] * b.activations(a, axle)
+    return G
+
+
+def newey_west_variance(u: NDArray, max_lag: int | None = None) -> NDArray:
+    """Long-run variance of the sum of each column of ``u`` (n, d) (Newey-West, Bartlett).
+
+    The bandwidth is the lag where the mean absolute autocorrelation of the columns first
+    drops below ``2/sqrt(n)`` (their noise level), times 4, at least ``4 n^(2/9)`` and at
+    most ``n/4``.
+    """
+    u = np.asarray(u, dtype=float)
+    n = u.shape[0]
+    if n < 8:
+        return np.sum(u**2, axis=0)
+    u = u - u.mean(axis=0)
+    nfft = 1 << int(math.ceil(math.log2(2 * n)))
+    F = np.fft.rfft(u, nfft, axis=0)
+    acov = np.fft.irfft(F * np.conj(F), nfft, axis=0)[:n]  # sum_k u_k u_{k+l}
+    if max_lag is None:
+        rho = np.mean(np.abs(acov / np.maximum(acov[0], 1e-300)), axis=1)
+        below = np.flatnonzero(rho < 2.0 / math.sqrt(n))
+        first = int(below[0]) if len(below) else n // 4
+        max_lag = int(min(max(4 * first, 4 * n ** (2.0 / 9.0)), n // 4))
+    lags = np.arange(1, max_lag + 1)
+    w = 1.0 - lags / (max_lag + 1.0)
+    return acov[0] + 2.0 * np.sum(w[:, None] * acov[1 : max_lag + 1], axis=0)
+
+
+@dataclass
+class OfflineFit:
+    """Result of :func:`refine`.
+
+    Attributes
+    ----------
+    weights : (nw,) refined weights
+    hessian : (nw, nw) ``A = sum Psi^T S^-1 Psi + Lambda_0`` at the solution
+    prior_precision : (nw, nw)
+    covariance : (nw, nw) ``A^-1`` (model-based)
+    trace : EstimateTrace
+        Final pass with the refined weights held (states, slips, forces, health, std).
+    cost : list of float
+        Cost per Gauss-Newton iteration.
+    iterations : int
+    updates : int
+        Measurements in the fit (after the burn-in and the gate).
+    inflation : dict
+        Sandwich / model variance ratio of the stiffness per axle.
+    """
+
+    weights: NDArray
+    hessian: NDArray
+    prior_precision: NDArray
+    covariance: NDArray
+    trace: EstimateTrace
+    cost: list
+    iterations: int
+    updates: int
+    scores: NDArray = field(repr=False, default=None)
+    _u_cache: dict = field(default_factory=dict, repr=False)
+
+    def variance(self, g: NDArray) -> NDArray:
+        """Variance of ``g^T w`` for rows ``g`` (n, nw): sandwich on the data share, prior share kept."""
+        g = np.atleast_2d(g)
+        Ainv_g = np.linalg.solve(self.hessian, g.T)  # (nw, n)
+        model = np.einsum("ij,ij->j", g.T, Ainv_g)
+        data_H = self.hessian - self.prior_precision
+        data_part = np.einsum("ij,ij->j", Ainv_g, data_H @ Ainv_g)
+        prior_part = np.maximum(model - data_part, 0.0)
+        if self.scores is None or self.scores.shape[0] < 8:
+            return model
+        u = self.scores @ Ainv_g  # (rows, n): each direction's score series
+        sandwich = newey_west_variance(u)
+        return prior_part + np.maximum(sandwich, data_part)
+
+    def inflation_factor(self, g: NDArray) -> NDArray:
+        g = np.atleast_2d(g)
+        Ainv_g = np.linalg.solve(self.hessian, g.T)
+        model = np.einsum("ij,ij->j", g.T, Ainv_g)
+        return self.variance(g) / np.maximum(model, 1e-300)
+
+
+def _solve_step(A: NDArray, rhs: NDArray, w: NDArray, lo: NDArray, hi: NDArray) -> NDArray:
+    """Box-projected Newton step: solve ``A dw = rhs`` with variables at an active bound fixed."""
+    free = np.ones(len(w), dtype=bool)
+    dw = np.zeros_like(w)
+    for _ in range(len(w)):
+        dw[:] = 0.0
+        idx = np.flatnonzero(free)
+        dw[idx] = np.linalg.solve(A[np.ix_(idx, idx)], rhs[idx] - A[np.ix_(idx, ~free)] @ dw[~free])
+        new = w + dw
+        hit = free & (((new < lo) & (dw < 0)) | ((new > hi) & (dw > 0)))
+        if not hit.any():
+            break
+        free &= ~hit
+        dw[~free] = np.clip(w[~free] + dw[~free], lo[~free], hi[~free]) - w[~free]
+    return np.clip(w + dw, lo, hi) - w
+
+
+def _pass(observer, sensors, w, fit_from, gate, final=False):
+    """One pass with the weights held and the Kalman predictor; returns the normal equations."""
+    nw = observer.n_weights
+    acc = K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4))
+    observer.reset(weights=w)
+    tr = observer.run(sensors, mode="fixed", accumulator=acc, accumulate_from=fit_from, gate=gate, store_scores=final,
+                      compute_std=final, store_weights=False, kalman=True)  # fmt: skip
+    return acc, tr
+
+
+def _nis_per_dof(acc) -> float:
+    return float(acc.stats[0] / max(acc.stats[2], 1.0))
+
+
+def calibrate_force_error(observer: NeuroAdaptiveObserver, sensors: dict, w: NDArray, fit_from: float, gate: float,
+                          bounds: tuple[float, float]) -> tuple[float, dict]:  # fmt: skip
+    """The process-noise force error [N] at which the Kalman predictor's innovations are
+    consistent (mean NIS per degree of freedom 1), found on a log grid and interpolated in
+    ``log NIS`` against ``log force error`` (a method-of-moments noise identification)."""
+    lo, hi = bounds
+    grid = np.geomspace(lo, hi, 4)
+    nis = []
+    for fe in grid:
+        observer.set_force_error(fe)
+        acc, _ = _pass(observer, sensors, w, fit_from, gate)
+        nis.append(_nis_per_dof(acc))
+    nis = np.array(nis)
+    ln_fe, ln_n = np.log(grid), np.log(np.maximum(nis, 1e-12))
+    if nis[-1] > 1.0:  # still inconsistent at the largest: the model error is larger than the range
+        fe = hi
+    elif nis[0] < 1.0:  # consistent even at the smallest
+        fe = lo
+    else:
+        j = int(np.flatnonzero(nis <= 1.0)[0])  # nis decreases with the force error
+        x0, x1, y0, y1 = ln_fe[j - 1], ln_fe[j], ln_n[j - 1], ln_n[j]
+        fe = float(np.exp(x0 + (0.0 - y0) * (x1 - x0) / (y1 - y0)))
+    observer.set_force_error(fe)
+    return fe, {"force_error_N": fe, "grid_N": grid.tolist(), "nis_per_dof": nis.tolist()}
+
+
+def _gauss_newton(observer, sensors, w, w0, Lam, lo, hi, fit_from, gate, max_iter, tol):
+    """Levenberg-Marquardt-damped Gauss-Newton passes at the current process noise."""
+    mu = 1e-3
+    acc, _ = _pass(observer, sensors, w, fit_from, gate)
+    cost = float(acc.stats[0] + (w - w0) @ Lam @ (w - w0))
+    costs = [cost]
+    scale = observer.basis.weight_range
+    it = 0
+    for it in range(1, max_iter + 1):
+        A = acc.hess + Lam
+        rhs = acc.grad - Lam @ (w - w0)
+        while True:
+            dw = _solve_step(A + mu * np.diag(np.diag(A)), rhs, w, lo, hi)
+            w_new = w + dw
+            acc_new, _ = _pass(observer, sensors, w_new, fit_from, gate)
+            cost_new = float(acc_new.stats[0] + (w_new - w0) @ Lam @ (w_new - w0))
+            if cost_new <= cost * (1 + 1e-9) or mu > 1e6:
+                break
+            mu *= 10.0
+        if cost_new <= cost * (1 + 1e-9):
+            w, acc, cost = w_new, acc_new, cost_new
+            mu = max(mu / 10.0, 1e-6)
+        costs.append(cost)
+        if np.max(np.abs(dw[: observer.basis.n_weights])) < tol * scale:
+            break
+    return w, acc, costs, it
+
+
+def refine(
+    observer: NeuroAdaptiveObserver,
+    sensors: dict,
+    w_start: NDArray,
+    prior_mean: NDArray | None = None,
+    prior_cov: NDArray | None = None,
+    max_iter: int = 4,
+    tol: float = 1e-3,
+    gate: float = 25.0,
+    force_errors: tuple[float, ...] = (3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4),
+    nis_limit: float = 1.3,
+) -> OfflineFit:
+    """Prediction-error refinement of the weights over the whole log (module docstring).
+
+    The Kalman predictor needs the process noise (the model's force error), which depends on
+    how good the curve already is. A continuation finds both: starting from a large force
+    error (a forgiving, low-information predictor that converges from a poor start), the fit
+    is repeated with the force error lowered stage by stage, each stage starting from the
+    previous weights, as long as the fitted innovations stay consistent (mean NIS per
+    degree of freedom at most ``nis_limit``); the last consistent stage is the answer.
+
+    Parameters
+    ----------
+    observer : NeuroAdaptiveObserver
+        Its model, noise and latency define the predictor (the Kalman predictor of its
+        model); its state is reset, its force error set to the chosen stage's.
+    sensors : dict
+        The log's sensor columns.
+    w_start : (nw,)
+        Starting weights (e.g. the causal pass' end weights).
+    prior_mean, prior_cov : optional
+        Prior of the weights (default: zero weights, the observer's prior covariance).
+    max_iter : int
+        Gauss-Newton passes per stage at most.
+    tol : float
+        A stage stops when the step's largest change is below ``tol`` times the weight range.
+    gate : float
+        Measurements whose NIS per degree of freedom exceeds this are left out (outliers,
+        frames during a health trip).
+    force_errors : tuple of float
+        Process-noise stages, as fractions of the mean static axle load.
+    nis_limit : float
+        Largest mean NIS per degree of freedom accepted as consistent.
+    """
+    nw = observer.n_weights
+    lo, hi = observer._weight_box()
+    w0 = np.zeros(nw) if prior_mean is None else np.asarray(prior_mean, dtype=float)
+    P0 = observer.prior_covariance() if prior_cov is None else np.asarray(prior_cov, dtype=float)
+    Lam = np.linalg.inv(P0)
+    Lam = 0.5 * (Lam + Lam.T)
+    t = np.asarray(sensors["t"], dtype=float)
+    fit_from = float(t[0]) + observer.settle_s
+    load = 0.5 * observer.vehicle.m * 9.81
+    w = np.clip(np.asarray(w_start, dtype=float), lo, hi)
+    stages = []
+    chosen = None
+    all_costs: list = []
+    iters = 0
+    for frac in force_errors:
+        observer.set_force_error(frac * load)
+        w_fit, acc, costs, it = _gauss_newton(observer, sensors, w, w0, Lam, lo, hi, fit_from, gate, max_iter, tol)
+        iters += it
+        all_costs += costs
+        nis = _nis_per_dof(acc)
+        stages.append({"force_error_N": frac * load, "nis_per_dof": nis, "iterations": it})
+        if nis > nis_limit and chosen is not None:
+            break  # the model error is larger than this stage's process noise: keep the previous stage
+        chosen = (frac * load, w_fit.copy(), nis)
+        w = w_fit
+        if nis > nis_limit:  # inconsistent even at the largest process noise: keep it, the sandwich covers it
+            break
+    fe, w, nis = chosen
+    observer.set_force_error(fe)
+    acc, trace = _pass(observer, sensors, w, fit_from, gate, final=True)
+    A = acc.hess + Lam
+    A = 0.5 * (A + A.T)
+    cov = np.linalg.inv(A)
+    observer.reset(weights=w)
+    observer._state.pw[:] = cov  # the observer now holds the refined curve and its covariance
+    fit = OfflineFit(w, A, Lam, cov, trace, all_costs, iters, int(acc.stats[1]), scores=trace.meta.pop("scores", None))
+    fit.force_error = fe
+    fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe}
+    fit.nis_per_dof = _nis_per_dof(acc)
+    return fit
+
+
+def pem_cost(observer: NeuroAdaptiveObserver, sensors: dict, w: NDArray, prior_cov: NDArray | None = None,
+             gate: float = 25.0) -> tuple[float, int]:  # fmt: skip
+    """Cost after one Gauss-Newton step from ``w``: ``J - g^T A^-1 g`` (the quadratic model's
+    minimum), and the number of updates; compares settings such as the latency cheaply."""
+    P0 = observer.prior_covariance() if prior_cov is None else prior_cov
+    Lam = np.linalg.inv(P0)
+    t = np.asarray(sensors["t"], dtype=float)
+    acc, _ = _pass(observer, sensors, w, float(t[0]) + observer.settle_s, gate)
+    A = acc.hess + Lam
+    rhs = acc.grad - Lam @ w
+    J = float(acc.stats[0] + w @ Lam @ w)
+    try:
+        return J - float(rhs @ np.linalg.solve(A, rhs)), int(acc.stats[1])
+    except np.linalg.LinAlgError:
+        return J, int(acc.stats[1])
+
+
+def stiffness_readout(observer: NeuroAdaptiveObserver, w: NDArray, slip: NDArray, axle: int, cap_deg: float = 2.0,
+                      max_drop: float = 0.08, min_deg: float = 0.25, degree: int = 5) -> tuple[NDArray, dict]:  # fmt: skip
+    """Linear functional ``g`` of the weights that reads the per-tire cornering stiffness from
+    the whole linear range of the learned curve (``C_nominal + g^T w``).
+
+    A polynomial of ``degree`` is fitted (least squares, weighted by where the drive put its
+    slip) to the learned axle curve over the slip the drive covered, clipped to the range in
+    which the curve's secant slope has dropped by at most ``max_drop``; its slope at zero,
+    halved, is the stiffness. A quintic over that range reads an exact Magic-Formula curve
+    to within a few hundredths of a percent, and it uses every sample in the range, where
+    the slope at zero alone rests on the narrow innermost basis segment.
+    """
+    a = slip[np.isfinite(slip)]
+    if len(a) < 10:
+        return stiffness_gradient(observer, axle), {"range_deg": None, "method": "slope at zero (no slip data)"}
+    lo_d, hi_d = np.percentile(a, [0.5, 99.5])
+    cap = math.radians(cap_deg)
+    c2 = 2.0 * (observer.vehicle.Cf if axle == 0 else observer.vehicle.Cr)
+    hist_edges = np.linspace(min(lo_d, 0.0), max(hi_d, 0.0), 41)
+    counts, _ = np.histogram(a, hist_edges)
+    while True:
+        r_lo, r_hi = max(min(lo_d, 0.0), -cap), min(max(hi_d, 0.0), cap)
+        grid = np.linspace(r_lo, r_hi, 121)
+        dens = np.interp(grid, 0.5 * (hist_edges[1:] + hist_edges[:-1]), counts.astype(float))
+        wt = dens / max(dens.max(), 1.0) + 0.02
+        X = np.vander(grid, degree + 1, increasing=True)
+        Xw = X * wt[:, None]
+        Pinv = np.linalg.solve(X.T @ Xw, Xw.T)  # (deg+1, n): weighted least-squares map
+        G = curve_gradient(observer, grid, axle)
+        g_axle = Pinv[1] @ G  # slope at zero = 2C + g_axle^T w
+        k = c2 + float(g_axle @ w)
+        ends = [e for e in (r_lo, r_hi) if abs(e) > 1e-6]
+        F = observer.axle_force(np.array(ends), axle, weights=w) if ends else np.zeros(0)
+        drop = max([1.0 - f / (k * e) for f, e in zip(F, ends)], default=0.0)
+        if drop <= max_drop or cap <= math.radians(min_deg):
+            break
+        cap *= 0.85
+    info = {"range_deg": [math.degrees(r_lo), math.degrees(r_hi)], "secant_drop_at_range_end": float(drop),
+            "method": f"weighted degree-{degree} polynomial fit of the learned curve over the range"}  # fmt: skip
+    return 0.5 * g_axle, info
+
+
+__all__ += ["pem_cost", "axle_index", "stiffness_readout", "calibrate_force_error"]
