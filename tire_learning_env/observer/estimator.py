@@ -191,8 +191,12 @@ def _quantise(x: float, per_decade: int = 20) -> float:
 
 
 def _slope_box(basis: SoftClipBasis, vehicle: VehicleParams) -> NDArray:
-    nl = basis.force_slope_bounds(margin=0.0)
-    return nl + np.array([[2.0 * vehicle.Cf], [2.0 * vehicle.Cr]])
+    nominal = np.array([[2.0 * vehicle.Cf], [2.0 * vehicle.Cr]])
+    box = basis.force_slope_bounds(margin=0.0) + nominal
+    # the soft clips overlap a little, so the sum of lower bounds can dip below zero; the
+    # gain design needs a positive slope (past the peak the certificate does not hold anyway)
+    box[:, 0] = np.maximum(box[:, 0], 0.05 * nominal[:, 0])
+    return box
 
 
 def build_observer(

@@ -14,7 +14,7 @@ scoring; the observer never reads it.
 >>> for _ in range(200):
 ...     obs, reward, terminated, truncated, info = env.step(np.zeros(1, dtype=np.float32))
 >>> sorted(info["estimate"])
-['diverged', 'force', 'force_nonlinear', 'slip', 'state', 'weights']
+['force', 'force_nonlinear', 'health', 'slip', 'state', 'std', 'weights']
 >>> bool(abs(info["estimate"]["slip"][0] - info["true_slip"][0]) < 1e-3)
 True
 """
@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from ..metrics import compute_metrics
 from ..observer import ObserverConfig, build_observer
-from ..observer.neuro_adaptive import ObserverTrace
+from ..observer.trace import EstimateTrace
 from ..simulation import SENSOR_KEYS
 
 __all__ = ["EstimatorWrapper", "ESTIMATE_OBSERVATION_NAMES"]
@@ -61,8 +61,14 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     -----
     ``info["estimate"]`` holds, at the end of the step (the instant of the ``true_*``
     keys; the prediction from the last frame): ``state`` (4,), ``slip`` (2,),
-    ``force_nonlinear`` (2,), ``force`` (2,), ``weights`` (2N,), ``diverged`` (bool: the
-    innovation stayed beyond its bound on 5 consecutive frames).
+    ``force_nonlinear`` (2,), ``force`` (2,), ``weights`` (2N,), ``std`` (one-sigma of the
+    internal state ``[v_y, r, e1, e2]``, weights' uncertainty included) and ``health``
+    (``ok``, ``settling``, ``no_data``, ``inconsistent``, ``diverged`` or ``recovering``: the
+    innovation test of :class:`~tire_learning_env.observer.HealthParams`).
+
+    The camera's noise and latency come from the env's camera specification unless
+    ``config`` gives them (the wrapper runs causally and cannot measure them first; the
+    offline :func:`~tire_learning_env.observer.estimate` measures them from the log).
     """
 
     def __init__(
@@ -99,7 +105,7 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 np.concatenate([base.high, _EST_HIGH]).astype(np.float32),
                 dtype=np.float32,
             )
-        self._traces: list[ObserverTrace] = []
+        self._traces: list[EstimateTrace] = []
         self._truth: list[dict] = []
         self._last: dict[str, Any] | None = None
 
@@ -149,9 +155,9 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return self.observer.cornering_stiffness()
 
     @property
-    def trace(self) -> ObserverTrace | None:
+    def trace(self) -> EstimateTrace | None:
         """Per-tick estimates of the episode so far."""
-        return ObserverTrace.concatenate(self._traces) if self._traces else None
+        return EstimateTrace.concatenate(self._traces) if self._traces else None
 
     def metrics(self, burn_in: float = 2.0) -> dict:
         """Score the episode so far against the env's ground truth (``metrics.json`` keys)."""
