@@ -33,7 +33,7 @@ from tire_learning_env.wrappers.excitation import (
     TruthRandomization,
     make_excitation_env,
     target_slip_range,
-    target_weight_indices,
+    target_functionals,
 )
 
 REPO = Path(__file__).resolve().parents[1]
@@ -88,7 +88,7 @@ def test_registered_spec_recreates_the_same_env():
 def test_spaces_and_unknown_keys():
     env = gym.make(ENV_ID)
     assert env.action_space.shape == (1,) and env.action_space.low[0] == -1 and env.action_space.high[0] == 1
-    n_target = len(env.get_wrapper_attr("target_indices"))
+    n_target = len(env.get_wrapper_attr("target_names"))
     assert env.observation_space.shape == (16 + n_target,)
     with pytest.raises(ParameterError, match="frobnicate"):
         gym.make(ENV_ID, config={"frobnicate": 1})
@@ -110,11 +110,29 @@ def test_target_range_is_the_nominal_slip_at_the_limit():
     assert 2 * veh.Cf * af * veh.lf == pytest.approx(2 * veh.Cr * ar * veh.lr)
     assert target_slip_range(veh, 8.0)[0] == pytest.approx(2 * af)
     env = make_excitation_env()
-    idx = target_weight_indices(env.observer.basis, (af, ar))
-    lo, hi = env.observer.basis.lower.ravel()[idx], env.observer.basis.upper.ravel()[idx]
-    # the 3 innermost segments each side ([0, 0.005], [0.005, 0.01], [0.01, 0.02] rad) and the bias, per axle
-    assert len(idx) == 14
-    assert np.all((lo == hi) | ((np.abs(lo) < 0.0201) & (np.abs(hi) < 0.0201)))
+    G, names = target_functionals(env.observer.basis, veh, (af, ar))
+    # the 3 innermost information segments each side ([0, 0.005], [0.005, 0.01], [0.01, 0.02] rad)
+    # and the zero-slip offset, per axle: the 30-entry observation the committed policy reads
+    assert G.shape == (14, env.observer.n_weights) and len(names) == 14
+    assert names[:7] == ("front slope [-0.02, -0.01]", "front slope [-0.01, -0.005]", "front slope [-0.005, -0]",
+                         "front slope [0, 0.005]", "front slope [0.005, 0.01]", "front slope [0.01, 0.02]", "front offset")
+    assert env.observation_space.shape == (30,)
+    assert len(target_functionals(env.observer.basis, veh, target_slip_range(veh, 8.0))[1]) == 18  # +[0.02, 0.04]
+    # each functional reads what it says off the learned curve, for any weights
+    rng = np.random.default_rng(0)
+    w = rng.uniform(env.observer.basis.weight_lower.ravel(), env.observer.basis.weight_upper.ravel())
+    obs = env.observer
+    for g, name in zip(G, names):
+        axle = name.split()[0]
+        c2 = 2.0 * (veh.Cf if axle == "front" else veh.Cr)
+        nonlinear = lambda a: obs.axle_force(a, axle, weights=w) - c2 * a  # noqa: E731
+        if name.endswith("offset"):
+            expected = nonlinear(0.0) / (c2 * 0.01)
+        else:
+            lo, hi = (float(v) for v in name[name.index("[") + 1 : -1].split(","))
+            expected = (nonlinear(hi) - nonlinear(lo)) / ((hi - lo) * c2)
+        assert g @ w == pytest.approx(expected, rel=1e-9, abs=1e-12)
+    assert np.linalg.matrix_rank(G) == 14
 
 
 # -- reward ---------------------------------------------------------------------------------------
@@ -158,8 +176,8 @@ def test_information_reward_is_computable_from_the_sensor_log_alone():
     sensors = {key: np.concatenate([lg[key] for lg in logs]) for key in SENSOR_KEYS}
     obs = build_observer(env.vehicle, EXCITATION_CAMERA, env.estimator.config, 1e-3)
     obs.run(sensors)
-    idx = env.target_indices
-    j = -np.linalg.slogdet(obs.pw[np.ix_(idx, idx)])[1]
+    G = env.target_functionals
+    j = -np.linalg.slogdet(G @ obs.pw @ G.T)[1]
     assert j == pytest.approx(info["excitation"]["information"], rel=1e-9)
     assert info["excitation"]["information"] > info["excitation"]["information_initial"] + 1.0
 

@@ -1,10 +1,19 @@
-"""The perfect-state diagnostics of :mod:`tire_learning_env.metrics` on a plant that is the bicycle model."""
+"""The metrics of :mod:`tire_learning_env.metrics`: short logs, and the perfect-state diagnostics on a plant
+that is the bicycle model."""
+
+import math
 
 import numpy as np
 import pytest
 
 from tire_learning_env.dynamics import BicyclePlant
-from tire_learning_env.metrics import bicycle_implied_axle_forces, oracle_cornering_stiffness
+from tire_learning_env.metrics import (
+    basis_regressors,
+    bicycle_implied_axle_forces,
+    compute_metrics,
+    oracle_cornering_stiffness,
+    stiffness_error_pct,
+)
 from tire_learning_env.observer.basis import make_basis
 from tire_learning_env.params import CameraParams, VehicleParams
 from tire_learning_env.simulation import simulate
@@ -55,3 +64,54 @@ def test_oracle_stiffness_recovers_the_tire_with_a_wrong_nominal(lane_change_log
     cf, cr = oracle_cornering_stiffness(np.asarray(truth["true_slip"])[keep], forces[keep], basis, nominal)
     assert cf == pytest.approx(vehicle.Cf, rel=2e-3)
     assert cr == pytest.approx(vehicle.Cr, rel=2e-3)
+
+
+def _score(lane_change_log, n_rows, stiffness_true=None):
+    vehicle, log = lane_change_log
+    s, truth = log.sensors, log.truth
+    rows = slice(0, n_rows)
+    truth = {k: np.asarray(truth[k])[rows] for k in ("true_state", "true_slip", "true_force")}
+
+    def curve(alpha, axle):
+        return 2.0 * (vehicle.Cf if axle == "front" else vehicle.Cr) * np.asarray(alpha)
+
+    return compute_metrics(
+        t=np.asarray(s["t"])[rows], xi_hat=truth["true_state"], slip_hat=truth["true_slip"],
+        force_nonlinear_hat=np.zeros((len(truth["true_slip"]), 2)), truth=truth, curve=curve,
+        true_curve=curve, stiffness_hat=(vehicle.Cf, vehicle.Cr),
+        stiffness_true=stiffness_true or (vehicle.Cf, vehicle.Cr), nominal_stiffness=(vehicle.Cf, vehicle.Cr),
+    )  # fmt: skip
+
+
+def test_metrics_of_a_log_shorter_than_the_burn_in_score_its_second_half(lane_change_log):
+    """A 0.5 s log (burn-in 2 s): scored after half the log, not a crash on empty arrays."""
+    m = _score(lane_change_log, 501)
+    assert m["burn_in_s"] == pytest.approx(0.25)
+    assert m["state_rmse"]["e1"] == 0.0 and m["slip_rmse_deg"]["front"] == 0.0  # the truth fed back
+    # the lane changes start after 5 s: no slip excited yet, so no curve score rather than a made-up one
+    assert m["excited_slip_range_deg"]["front"] == [0.0, 0.0]
+    assert all(math.isnan(v) for v in m["tire_curve_nrmse"].values())
+    assert m["cornering_stiffness"]["front"]["error_pct"] == 0.0
+    full = _score(lane_change_log, None)
+    assert full["burn_in_s"] == 2.0
+    with pytest.raises(ValueError, match="at least 2 rows"):
+        _score(lane_change_log, 1)
+
+
+def test_zero_true_stiffness_gives_a_nan_error_not_a_crash(lane_change_log):
+    vehicle, _ = lane_change_log
+    m = _score(lane_change_log, 3000, stiffness_true=(0.0, vehicle.Cr))
+    assert math.isnan(m["cornering_stiffness"]["front"]["error_pct"])
+    assert m["cornering_stiffness"]["rear"]["error_pct"] == 0.0
+    assert stiffness_error_pct(1.1, 1.0) == pytest.approx(10.0)
+
+
+def test_basis_regressors_reproduce_the_basis_force(lane_change_log):
+    vehicle, log = lane_change_log
+    basis = make_basis("two_sided", vehicle)
+    w = np.random.default_rng(1).uniform(basis.weight_lower.ravel(), basis.weight_upper.ravel())
+    slip = np.asarray(log.truth["true_slip"])
+    for axle in (0, 1):
+        X = basis_regressors(basis, slip[:, axle], axle)
+        assert X.shape == (len(slip), basis.n_per_axle)
+        np.testing.assert_allclose(X @ w.reshape(2, -1)[axle], basis.nonlinear_force(slip[:, axle], w, axle), rtol=1e-12)

@@ -11,7 +11,8 @@ Keys (the same for every study):
   201-point grid over the excited slip range, divided by the largest ``|F_true|`` there.
 - ``excited_slip_range_deg`` {front: [lo, hi], rear: [lo, hi]}: the 0.5 % and 99.5 %
   quantiles of the true slip after the burn-in (robust to single spikes).
-- ``cornering_stiffness`` {front: {estimated, true, error_pct}, rear: ...}: per tire [N/rad].
+- ``cornering_stiffness`` {front: {estimated, true, error_pct}, rear: ...}: per tire [N/rad]
+  (``error_pct`` NaN when the true stiffness is not positive).
 - ``lmi``: the gain certificate (:meth:`~.observer.gains.ObserverGains.summary`).
 - ``runtime_s``: wall time of the estimator.
 - ``convergence_time_s``: time after which the online tire-curve error stays below 5 %.
@@ -33,7 +34,7 @@ from numpy.typing import NDArray
 
 __all__ = [
     "compute_metrics", "excited_range", "curve_nrmse", "convergence_time", "bicycle_implied_axle_forces",
-    "oracle_cornering_stiffness", "AXLES",
+    "oracle_cornering_stiffness", "basis_regressors", "stiffness_error_pct", "AXLES",
 ]  # fmt: skip
 
 AXLES = ("front", "rear")
@@ -101,6 +102,20 @@ def bicycle_implied_axle_forces(
     return np.column_stack([(yaw + vehicle.lr * lateral) / wheelbase, (vehicle.lf * lateral - yaw) / wheelbase])
 
 
+def basis_regressors(basis, slip: NDArray, axle: int) -> NDArray:
+    """Regressors of the axle's nonlinear force, ``gamma_i sigma_ij(alpha^k)``, shape (n, N) (eq. 14).
+
+    Row ``k`` times the axle's weights ``W_i`` is the learned nonlinear force at ``slip[k]``.
+
+    Parameters
+    ----------
+    basis : SoftClipBasis
+    slip : (n,) slip angles [rad]
+    axle : 0 (front) or 1 (rear)
+    """
+    return basis.scale[axle] * basis.activations(np.asarray(slip, dtype=float), axle)
+
+
 def oracle_cornering_stiffness(
     slip: NDArray, force: NDArray, basis, nominal_stiffness: tuple[float, float]
 ) -> tuple[float, float]:
@@ -120,15 +135,13 @@ def oracle_cornering_stiffness(
     basis : SoftClipBasis
     nominal_stiffness : per-tire (front, rear) [N/rad] of the linear part
     """
-    from .observer.warm_start import regressors
-
     slip = np.asarray(slip, dtype=float)
     force = np.asarray(force, dtype=float)
     out = []
     N = basis.n_per_axle
     for axle in (0, 1):
         a = slip[:, axle]
-        X = regressors(basis, a, axle)
+        X = basis_regressors(basis, a, axle)
         y = force[:, axle] - 2.0 * nominal_stiffness[axle] * a
         w = np.linalg.lstsq(X, y, rcond=None)[0]
         weights = np.zeros((2, N))
@@ -136,6 +149,14 @@ def oracle_cornering_stiffness(
         slope = 2.0 * nominal_stiffness[axle] + float(basis.nonlinear_slope(0.0, weights.ravel(), axle))
         out.append(slope / 2.0)
     return out[0], out[1]
+
+
+def stiffness_error_pct(estimated: float, true: float) -> float:
+    """``100 (estimated / true - 1)`` [%]; NaN when ``true`` is not a positive finite stiffness."""
+    true = float(true)
+    if not (math.isfinite(true) and true > 0):
+        return float("nan")
+    return 100.0 * (float(estimated) / true - 1.0)
 
 
 def _rmse(a: NDArray, b: NDArray) -> float:
@@ -171,11 +192,15 @@ def compute_metrics(
     nominal_stiffness : per-tire stiffness the estimator assumed (front, rear) [N/rad]
     lmi : gain certificate summary
     runtime_s : estimator wall time [s]
-    burn_in : seconds left out at the start
+    burn_in : seconds left out at the start; on a log shorter than twice the burn-in, the
+        first half of the log instead (the value used is reported as ``burn_in_s``)
     curve_history : ``(times, k -> curve at times[k])`` of the *online* estimate, for
         ``convergence_time_s``
     """
     t = np.asarray(t, dtype=float)
+    if len(t) < 2:
+        raise ValueError(f"need at least 2 rows to score an estimate, got {len(t)}")
+    burn_in = float(min(burn_in, 0.5 * (t[-1] - t[0])))
     keep = t >= t[0] + burn_in
     x_true = np.asarray(truth["true_state"])[keep]
     slip_true = np.asarray(truth["true_slip"])[keep]
@@ -202,7 +227,7 @@ def compute_metrics(
         a: {
             "estimated": float(stiffness_hat[i]),
             "true": float(stiffness_true[i]),
-            "error_pct": 100.0 * (float(stiffness_hat[i]) / float(stiffness_true[i]) - 1.0),
+            "error_pct": stiffness_error_pct(stiffness_hat[i], stiffness_true[i]),
         }
         for i, a in enumerate(AXLES)
     }

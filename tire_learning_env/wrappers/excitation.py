@@ -12,17 +12,27 @@ Information reward (computable on a real car)
 ---------------------------------------------
 The observer adapts its weights ``w`` by recursive least squares; its covariance
 ``P_w`` (``observer.pw``) is the inverse of the information the camera innovations have
-carried about ``w`` so far. With the two-sided basis every weight belongs to one slip
-*segment*, so the weights of the segments that overlap the **target slip range**
-``|alpha_i| <= alpha_i*`` (plus the bias members) are exactly the parameters of the
-curve over that range. The information measure is
+carried about ``w`` so far. The task measures that information on fixed **information
+segments** of slip, independent of the observer's basis: the segments between
+:data:`INFORMATION_EDGES` (``0, 0.005, 0.01, 0.02, 0.04, 0.08, 0.2`` rad) on each side of
+zero. The curve over the **target slip range** ``|alpha_i| <= alpha_i*`` is described by
+
+- the mean slope of the learned nonlinear force over each segment that overlaps the
+  range, in units of the nominal axle stiffness,
+  ``g_s^T w = (f_i(b) - f_i(a)) / ((b - a) 2 C_i)`` for the segment ``[a, b]``;
+- the force offset at zero slip, ``f_i(0) / (2 C_i 0.01 rad)``,
+
+all linear in ``w`` (eq. 14), stacked in the rows of ``G`` (:func:`target_functionals`).
+Their covariance is ``P_SS = G P_w G^T`` and the information measure is
 
     J = -log det P_SS            ("logdet", D-optimal; default)
     J = -log lambda_max(P_SS)    ("min_eig", E-optimal: the least-informed direction)
 
-with ``P_SS`` the covariance block of those target weights (marginal information), and
-the step reward is ``information_scale * (J_k - J_{k-1})``, so an episode's return is
-the information gained over the drive, minus the penalties. Everything in it (``P_w``,
+and the step reward is ``information_scale * (J_k - J_{k-1})``, so an episode's return is
+the information gained over the drive, minus the penalties. (With a basis of one member
+per information segment, such as the two-sided basis with the segment edges as
+breakpoints, ``G`` nearly picks the target weights: only the soft corners blur the
+segment ends.) Everything in it (``P_w``,
 the camera ``e1`` and the observer's ``e1`` estimate, the IMU ``a_y``, the measured
 steering angle) is available on a car; ground truth is used for scoring only.
 
@@ -117,14 +127,15 @@ __all__ = [
     "make_excitation_env",
     "make_highway_excitation_env",
     "target_slip_range",
-    "target_weight_indices",
+    "target_functionals",
+    "INFORMATION_EDGES",
 ]
 
 #: Camera of the excitation envs: a production-like 30 Hz lane camera with Gaussian noise
 #: (2 cm on e1, 0.2 deg on e2).
 EXCITATION_CAMERA = CameraParams(rate=30.0, noise="gaussian", e1_noise=0.02, e2_noise=math.radians(0.2))
 
-#: Names of the observation entries before the per-weight information features.
+#: Names of the observation entries before the per-functional information features.
 EXCITATION_OBSERVATION_NAMES = (
     "e1_camera / lane_margin",
     "e2_camera / 0.05 rad",
@@ -161,20 +172,72 @@ def target_slip_range(vehicle: VehicleParams, ay_limit: float) -> tuple[float, f
     )
 
 
-def target_weight_indices(basis, target: tuple[float, float]) -> NDArray[np.int64]:
-    """Indices into ``w`` (2N,) of the members that shape the curve inside ``|alpha_i| <= target_i``.
+#: Edges [rad] of the information segments (module docstring), each mirrored to negative slip.
+INFORMATION_EDGES = (0.0, 0.005, 0.01, 0.02, 0.04, 0.08, 0.2)
+#: Slip [rad] whose nominal force is the unit of the zero-slip force offset functional.
+OFFSET_UNIT_SLIP = 0.01
 
-    A segment member ``[b_lo, b_hi]`` counts when it overlaps ``(-target_i, target_i)``;
-    constant (bias) members always count. Members beyond the range are flat inside it.
+
+def target_functionals(
+    basis, vehicle: VehicleParams, target: tuple[float, float], n_weights: int | None = None
+) -> tuple[NDArray[np.float64], tuple[str, ...]]:
+    """Rows ``G`` of the linear functionals of ``w`` that describe the curve on the target range.
+
+    Per axle (front first): for each information segment ``[a, b]`` (between consecutive
+    :data:`INFORMATION_EDGES`, and its mirror ``[-b, -a]``) that overlaps
+    ``(-target_i, target_i)``, the mean slope of the nonlinear force over it relative to
+    the nominal axle stiffness, ``(f_i(b) - f_i(a)) / ((b - a) 2 C_i)``; then the force
+    offset at zero slip ``f_i(0) / (2 C_i OFFSET_UNIT_SLIP)`` when the basis can represent
+    one (eq. 14: ``f_i(alpha) = gamma_i sum_j W_ij sigma_ij(alpha)``).
+
+    Parameters
+    ----------
+    basis : SoftClipBasis
+        The observer's basis.
+    vehicle : VehicleParams
+        Nominal vehicle (``Cf``, ``Cr`` [N/rad] per tire: the unit of the slopes).
+    target : (float, float)
+        Target slip half-widths ``(alpha_f*, alpha_r*)`` [rad].
+    n_weights : int, optional
+        Length of the observer's weight vector (tire weights first, then any sensor
+        offsets); default ``basis.n_weights``.
+
+    Returns
+    -------
+    G : ndarray, shape (m, n_weights)
+        One functional per row.
+    names : tuple of str
+        ``"front slope [0.005, 0.01]"``, ``"front offset"``, ... (slip in rad).
     """
-    n = basis.n_per_axle
-    out = []
-    for axle in (0, 1):
-        lo, hi, a = basis.lower[axle], basis.upper[axle], float(target[axle])
-        for j in range(n):
-            if lo[j] == hi[j] or (lo[j] < a and hi[j] > -a):
-                out.append(axle * n + j)
-    return np.asarray(out, dtype=np.int64)
+    N = basis.n_per_axle
+    nw = basis.n_weights if n_weights is None else int(n_weights)
+    rows, names = [], []
+    edges = INFORMATION_EDGES
+    for axle, name in enumerate(AXLES):
+        c2 = 2.0 * (vehicle.Cf if axle == 0 else vehicle.Cr)
+        a_t = float(target[axle])
+        if not a_t > 0:
+            raise ParameterError(f"target slip must be > 0 rad, got {target!r}")
+
+        def act(alpha):
+            return basis.scale[axle] * basis.activations(np.asarray(alpha, dtype=float), axle)
+
+        segments = []
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            if lo < a_t:
+                segments += [(-hi, -lo), (lo, hi)]
+        segments.sort()
+        for lo, hi in segments:
+            g = np.zeros(nw)
+            g[axle * N : (axle + 1) * N] = (act(hi) - act(lo)) / ((hi - lo) * c2)
+            rows.append(g)
+            names.append(f"{name} slope [{lo:g}, {hi:g}]")
+        g = np.zeros(nw)
+        g[axle * N : (axle + 1) * N] = act(0.0) / (c2 * OFFSET_UNIT_SLIP)
+        if np.max(np.abs(g)) > 1e-9:  # a basis without bias members pins f(0) = 0
+            rows.append(g)
+            names.append(f"{name} offset")
+    return np.vstack(rows), tuple(names)
 
 
 @dataclass(frozen=True)
@@ -198,7 +261,7 @@ class ExcitationConfig(_Params):
     reward : {"information", "truth_nrmse"}
         Real-car information gain (default) or the simulation-only error decrease.
     information_measure : {"logdet", "min_eig"}
-        D- or E-optimal information measure of the target weights.
+        D- or E-optimal information measure of the target functionals.
     information_scale : float
         Reward per nat of information [-].
     truth_scale : float
@@ -394,8 +457,9 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     ``Box(-10, 10, (16 + n_target,), float32)``: :data:`EXCITATION_OBSERVATION_NAMES`
     (camera, IMU, steering, road, time and the observer's state/slip estimates, each
-    normalised), then for each target weight ``0.5 log10(P_ii(0) / P_ii)``, the number
-    of decades its standard deviation has shrunk. Only what a car knows.
+    normalised), then for each target functional (:func:`target_functionals`)
+    ``0.5 log10(P_SS,ii(0) / P_SS,ii)``, the number of decades its standard deviation has
+    shrunk. Only what a car knows.
 
     ## Rewards
 
@@ -466,10 +530,12 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.randomization is not None and not hasattr(base, "plant"):
             raise TypeError(f"{type(base).__name__} does not expose its truth plant; truth randomisation needs one")
         self.target: tuple[float, float] = self.config.target(self.vehicle)
-        self.target_indices = target_weight_indices(self.observer.basis, self.target)
+        self.target_functionals, self.target_names = target_functionals(
+            self.observer.basis, self.vehicle, self.target, self.observer.n_weights
+        )
         self.dt_policy = 1.0 / float(getattr(base, "policy_rate", 20.0))
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        n_obs = len(EXCITATION_OBSERVATION_NAMES) + len(self.target_indices)
+        n_obs = len(EXCITATION_OBSERVATION_NAMES) + len(self.target_names)
         self.observation_space = spaces.Box(-_OBS_BOUND, _OBS_BOUND, shape=(n_obs,), dtype=np.float32)
         self._truth_rng: np.random.Generator | None = None
         self.truth_draw: dict[str, float] | None = None
@@ -496,19 +562,23 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     # -- information -------------------------------------------------------------------------
     def information(self) -> float:
-        """The information measure ``J`` of the target weights now (module docstring) [nat]."""
-        idx = self.target_indices
-        p = self.observer.pw[np.ix_(idx, idx)]
-        p = 0.5 * (p + p.T)
+        """The information measure ``J`` of the target functionals now (module docstring) [nat]."""
+        p = self.target_covariance()
         if self.config.information_measure == "logdet":
             sign, logdet = np.linalg.slogdet(p)
             return -float(logdet) if sign > 0 else float("inf")
         return -math.log(float(np.linalg.eigvalsh(p)[-1]))
 
     def information_features(self) -> NDArray[np.float64]:
-        """``0.5 log10(P_ii(0) / P_ii)`` for each target weight: decades of std reduction."""
-        d = np.diag(self.observer.pw)[self.target_indices]
+        """``0.5 log10(P_SS,ii(0) / P_SS,ii)`` for each target functional: decades of std reduction."""
+        d = np.diag(self.target_covariance())
         return 0.5 * np.log10(self._p0_diag / np.maximum(d, 1e-300))
+
+    def target_covariance(self) -> NDArray[np.float64]:
+        """``P_SS = G P_w G^T``: covariance of the target functionals now (symmetrised)."""
+        G = self.target_functionals
+        p = G @ self.observer.pw @ G.T
+        return 0.5 * (p + p.T)
 
     def truth_error(self) -> float:
         """Mean over the axles of the true curve NRMSE on the target range (simulation only)."""
@@ -536,7 +606,7 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             if hasattr(base, "sim"):
                 base.sim.plant = plant
         obs, info = self.env.reset(seed=seed, options=options)
-        self._p0_diag = np.diag(self.observer.pw)[self.target_indices].copy()
+        self._p0_diag = np.diag(self.target_covariance()).copy()
         self._j0 = self._j = self.information()
         self._e0 = self._e = self.truth_error() if self.config.reward == "truth_nrmse" else math.nan
         self._prev_action = 0.0
