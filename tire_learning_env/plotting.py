@@ -140,6 +140,7 @@ def plot_tire_curves(
     span_deg: float | None = None,
     title: str = "",
     path=None,
+    bands: dict[str, Callable[[NDArray, str], NDArray]] | None = None,
 ):
     """Axle force vs slip: learned curves against the truth, excited range marked (paper Fig. 8 / 14).
 
@@ -150,6 +151,8 @@ def plot_tire_curves(
     excited : axle -> ``[lo_deg, hi_deg]`` (drawn as a dotted box)
     samples : axle -> ``(slip, force)`` scatter (e.g. true samples or a measured cloud)
     span_deg : half-width of the plotted slip range [deg] (default: 1.6 x the excited range)
+    bands : dict label -> ``(alpha, axle) -> std`` [N]
+        A +/- 2 sigma band is shaded around the curve of the same label.
     """
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, axle in zip(axes, ("front", "rear")):
@@ -163,7 +166,12 @@ def plot_tire_curves(
         if true_curve is not None:
             ax.plot(grid * _DEG, true_curve(grid, axle), "k-", lw=1.6, label="true")
         for (label, fn), style in zip(curves.items(), ("r--", "b-.", "g:", "m--", "c-.", "y:")):
-            ax.plot(grid * _DEG, fn(grid, axle), style, lw=1.3, label=label)
+            f = fn(grid, axle)
+            ax.plot(grid * _DEG, f, style, lw=1.3, label=label)
+            if bands and label in bands:
+                sd = bands[label](grid, axle)
+                ax.fill_between(grid * _DEG, f - 2 * sd, f + 2 * sd, color=style[0], alpha=0.2, lw=0,
+                                label=f"{label} +/-2 sigma")
         ylo, yhi = ax.get_ylim()
         ax.add_patch(plt.Rectangle((lo, ylo), hi - lo, yhi - ylo, fill=False, ls=":", ec="b", lw=1.2))
         ax.set_xlabel(r"slip angle [deg]")

@@ -90,8 +90,8 @@ class StudySpec:
             raise ParameterError(f"noise must be 'paper' or 'none', got {noise!r}")
         else:
             cam = cam.replace(rate=rate)
-        known = self.config.linear_region_deg > 0
-        return replace(self, camera=cam, config=ObserverConfig.for_camera(cam, stiffness_known=known, basis=self.config.basis))
+        known = self.config.stiffness_known
+        return replace(self, camera=cam, config=ObserverConfig.for_camera(cam, stiffness_known=known, basis=self.config.basis, sensors="camera"))
 
 
 STUDY_IDS = (1, 2, 3)
@@ -109,7 +109,7 @@ def study_spec(study: int, duration: float | None = None) -> StudySpec:
             true_vehicle=sedan,
             nominal_vehicle=sedan,
             camera=CameraParams(rate=1000.0),
-            config=ObserverConfig.for_camera(CameraParams(rate=1000.0), stiffness_known=True),
+            config=ObserverConfig.for_camera(CameraParams(rate=1000.0), stiffness_known=True, sensors="camera"),
             notes=(
                 "paper settings: 1 kHz noise-free camera, zero initial state, LS warm start; the certified "
                 "decay rate (reported under lmi) exceeds the paper's 2 1/s",
@@ -132,7 +132,7 @@ def study_spec(study: int, duration: float | None = None) -> StudySpec:
                 true_vehicle=truth,
                 nominal_vehicle=nominal,
                 camera=CameraParams(rate=1000.0),
-                config=ObserverConfig.for_camera(CameraParams(rate=1000.0), stiffness_known=False),
+                config=ObserverConfig.for_camera(CameraParams(rate=1000.0), stiffness_known=False, sensors="camera"),
                 notes=(
                     "CommonRoad multi-body model (BMW 320i, PAC2002, 0.45 m relaxation), 1 kHz noise-free camera",
                     "assumed stiffness = effective axle stiffness x the paper's ratios 102466/90211 and 102466/87946",
@@ -148,7 +148,7 @@ def study_spec(study: int, duration: float | None = None) -> StudySpec:
                 true_vehicle=truth,
                 nominal_vehicle=truth.replace(Cf=c_eff[0], Cr=c_eff[1]),
                 camera=CameraParams.paper_noise(rate=1000.0),
-                config=ObserverConfig.for_camera(CameraParams.paper_noise(rate=1000.0), stiffness_known=True),
+                config=ObserverConfig.for_camera(CameraParams.paper_noise(rate=1000.0), stiffness_known=True, sensors="camera"),
                 notes=(
                     "CommonRoad multi-body model (BMW 320i, PAC2002, 0.45 m relaxation), 1 kHz camera with the "
                     "paper's uniform noise",
@@ -211,14 +211,20 @@ def run_study(
         stiffness_true=true_stiffness,
         nominal_stiffness=nominal,
         lmi=result.gains.summary(),
-        runtime_s=result.runtime_s,
+        runtime_s=result.runtime_s["total"],
         curve_history=_online_history(result),
     )
     if tire_level is not None:
         metrics.update(_tire_level_scores(metrics, result.axle_force, result.cornering_stiffness(), *tire_level))
     sim_seconds = float(log.sensors["t"][-1] - log.sensors["t"][0] + log.dt)
-    metrics["cpu_s_per_simulated_s"] = result.runtime_s / sim_seconds
-    metrics["diverged"] = bool(result.trace.diverged)
+    metrics["cpu_s_per_simulated_s"] = result.runtime_s["total"] / sim_seconds
+    metrics["uncertainty"] = {
+        "verdict": result.verdict,
+        "stiffness": result.stiffness_report(),
+        "learned_slip_range_deg": result.learned_slip_range(),
+    }
+    metrics["health"] = {"final": result.online.final_health, "fraction": result.online.health_fraction}
+    metrics["calibration"] = {k: v for k, v in result.calibration.items() if not k.startswith("_")}
     metrics["study"] = _describe(spec)
     metrics["paper"] = PAPER_RESULTS.get(spec.study, {})
     baseline_metrics = baseline_result = None
@@ -338,7 +344,7 @@ def _figures(out: Path, spec: StudySpec, log: SimulationLog, plant, result, metr
     nominal = np.array([spec.nominal_vehicle.Cf, spec.nominal_vehicle.Cr])
     nl_true = log.truth["true_force"] - log.truth["true_slip"] * 2.0 * nominal
     plotting.plot_nonlinear_force(t[sl], nl_true[sl], result.trace.force_nonlinear[sl], title, out / "nonlinear_force.png")
-    plotting.plot_weights(t[sl], result.trace.weights[sl], result.observer.basis.n_per_axle, title, out / "weights.png")
+    plotting.plot_weights(t[sl], result.online_trace.weights[sl], result.observer.basis.n_per_axle, title, out / "weights.png")
     curves = {"learned (observer)": result.axle_force}
     if baseline_result is not None:
         curves["joint UKF"] = baseline_result.axle_force
@@ -346,7 +352,8 @@ def _figures(out: Path, spec: StudySpec, log: SimulationLog, plant, result, metr
     samples = {a: (log.truth["true_slip"][:, i], log.truth["true_force"][:, i]) for i, a in enumerate(AXLES)}
     true_curve, _, _ = _references(plant)
     plotting.plot_tire_curves(
-        curves, true_curve, metrics["excited_slip_range_deg"], samples, title=title, path=out / "tire_curves.png"
+        curves, true_curve, metrics["excited_slip_range_deg"], samples, title=title, path=out / "tire_curves.png",
+        bands={"learned (observer)": result.axle_force_std},
     )
     if spec.plant == "high_order":
         i = 0

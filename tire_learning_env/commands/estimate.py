@@ -1,97 +1,185 @@
-"""``tire-learning estimate``: run the observer offline on a driving log."""
+"""``tire-learning estimate``: learn the tire curves from a driving log (camera, IMU or both).
+
+Nothing about the camera, the IMU or the tires needs to be known: the sensor noise, the
+camera latency and the cornering stiffness are estimated from the log itself
+(:func:`tire_learning_env.observer.estimate`), and ``metrics.json`` records what was estimated
+and what was assumed. Flags let a user who *does* know something say so.
+"""
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from ..io import DrivingLog, atomic_directory, atomic_write_json, read_log, write_table
-from ..params import CameraParams, ParameterError
+from ..params import ParameterError
 from ._common import add_vehicle_argument, vehicle_from_args
+
+CAMERA_COLUMNS = ("e1", "e2", "kappa")
+IMU_COLUMNS = ("ay", "yaw_rate")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "estimate",
-        help="learn the tire curve from a driving log (camera e1/e2, or IMU-only)",
-        description="Run the neuro-adaptive observer on a log in the shared format (LOG_FORMAT.md). "
-        "Camera logs use e1/e2; IMU-only logs use yaw rate and lateral acceleration. Writes "
-        "DIR/estimates.csv, DIR/metrics.json (ground-truth scores when true_* columns exist; "
-        "the estimator never reads them), the learned tire curves (PNG and CSV). DIR is replaced atomically.",
+        help="learn the tire curves from a driving log (camera e1/e2, IMU, or both)",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        description="Run the neuro-adaptive observer on a log in the shared format (LOG_FORMAT.md). The sensor set "
+        "is picked from the log's columns (camera e1/e2/kappa, IMU ay/yaw_rate, or both) and printed. Sensor noise, "
+        "camera latency and cornering stiffness are estimated from the log unless given. Writes DIR/estimates.csv, "
+        "DIR/metrics.json (summary with +/-2 sigma bands and the identifiability verdict; what was estimated and "
+        "what was assumed; ground-truth scores when true_* columns exist, which the estimator never reads), "
+        "DIR/tire_curves.csv and DIR/tire_curves.png.",
     )
-    p.add_argument("log", type=Path, help="driving log CSV")
+    p.add_argument("log", type=Path, help="driving log (CSV in the shared format)")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     add_vehicle_argument(p)
+    p.add_argument("--sensors", choices=["auto", "camera", "imu", "both"], default="auto",
+                   help="measurement model; auto = the camera when the log has one, else the IMU")  # fmt: skip
     p.add_argument("--camera-noise", type=float, nargs=2, metavar=("E1_STD", "E2_STD"), default=None,
-                   help="camera noise std [m] [rad] the gains are designed for (default: noise-free)")
+                   help="camera noise STANDARD DEVIATION, e1 [m] and e2 [rad] (a uniform +/-h noise has std "
+                        "h/sqrt(3)); default: estimated from the log")  # fmt: skip
+    p.add_argument("--imu-noise", type=float, nargs=2, metavar=("AY_STD", "R_STD"), default=None,
+                   help="IMU noise standard deviation, a_y [m/s^2] and yaw rate [rad/s]; default: estimated from the log")
+    p.add_argument("--latency", type=float, default=None, metavar="S",
+                   help="camera latency [s]; default: estimated from the log")
+    p.add_argument("--stiffness-known", action="store_true",
+                   help="trust the vehicle file's Cf, Cr: pin the curve to them in the linear region "
+                        "(default: the stiffness is learned)")  # fmt: skip
     p.add_argument("--basis", choices=["two_sided", "paper"], default="two_sided", help="activation basis")
-    p.add_argument("--no-warm-start", action="store_true", help="single causal pass (no least-squares restart)")
-    p.add_argument("--linear-region-deg", type=float, default=0.5,
-                   help="warm start: slip below which f_hat is set to zero [deg]; 0 if the nominal stiffness is uncertain")
+    p.add_argument("--no-offline", action="store_true",
+                   help="report the causal (on-line) pass only, without the offline refinement over the whole log")
     p.set_defaults(func=run)
 
 
-def camera_sensors(log: DrivingLog) -> tuple[dict, float]:
-    """Observer rows from a camera log: ``psi_dot_des = vx kappa``, ``psi_ddot_des`` by differentiation."""
+def _has(sensors: dict, name: str) -> bool:
+    return name in sensors and bool(np.any(np.isfinite(np.asarray(sensors[name], dtype=float))))
+
+
+def choose_sensors(log: DrivingLog, requested: str = "auto") -> tuple[str, str]:
+    """``(sensors, why)``: the measurement model for ``log`` and a sentence that says why.
+
+    Raises :class:`ParameterError` naming the missing columns when the request cannot be met.
+    """
     s = log.sensors
-    t = s["t"]
-    dt = float(np.median(np.diff(t)))
-    kappa = np.nan_to_num(s["kappa"])
-    pdd = s["vx"] * kappa
-    pddd = np.gradient(pdd, t)
-    rows = {"t": t, "delta": s["delta"], "vx": s["vx"], "psi_dot_des": pdd, "psi_ddot_des": pddd, "e1": s["e1"], "e2": s["e2"]}
-    return rows, dt
+    cam_missing = [c for c in CAMERA_COLUMNS if not _has(s, c)]
+    imu_missing = [c for c in IMU_COLUMNS if not _has(s, c)]
+    need = {"camera": cam_missing, "imu": imu_missing, "both": cam_missing + imu_missing}
+    if requested != "auto":
+        if need[requested]:
+            raise ParameterError(f"{log.source}: --sensors {requested} needs column(s) {need[requested]} with data")
+        return requested, "given (--sensors)"
+    if not cam_missing and not imu_missing:
+        from ..observer.estimator import FUSION_NOTE
+
+        return "camera", f"the log has camera (e1, e2, kappa) and IMU (ay, yaw_rate) columns; {FUSION_NOTE}"
+    if not cam_missing:
+        return "camera", "the log has camera columns (e1, e2, kappa) and no IMU columns"
+    if not imu_missing:
+        partial = [c for c in CAMERA_COLUMNS if c not in cam_missing]
+        why = "the log has IMU columns (ay, yaw_rate) and no camera columns"
+        if partial:
+            why = (f"the log has IMU columns (ay, yaw_rate) but the camera columns {cam_missing} are missing or empty "
+                   f"(present: {partial}), so the camera is not used")  # fmt: skip
+        return "imu", why
+    missing = [f"'{c}'" for c in cam_missing]
+    raise ParameterError(
+        f"{log.source}: cannot estimate: camera column(s) {', '.join(missing)} missing or empty, and no IMU "
+        f"columns {list(IMU_COLUMNS)}"
+    )
+
+
+def config_from_args(args: argparse.Namespace, sensors: str):
+    from ..observer import ObserverConfig
+
+    if args.latency is not None and not (math.isfinite(args.latency) and args.latency >= 0):
+        raise ParameterError(f"--latency must be a finite number of seconds >= 0, got {args.latency}")
+    return ObserverConfig(
+        sensors=sensors, basis=args.basis, camera_noise=args.camera_noise, imu_noise=args.imu_noise,
+        latency=args.latency, stiffness_known=args.stiffness_known, offline=not args.no_offline,
+    )  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
     log = read_log(args.log)
     vehicle = vehicle_from_args(args)
-    if log.kind == "imu":
+    sensors, why = choose_sensors(log, args.sensors)
+    print(f"sensors: {sensors} ({why})", file=sys.stderr)
+    config = config_from_args(args, sensors)
+    if sensors == "imu":
         from ..imu import estimate_imu_log
 
-        metrics = estimate_imu_log(log, vehicle, args.out, basis=args.basis, warm_start=not args.no_warm_start)
-        k = metrics["cornering_stiffness"]["final"]["per_axle_N_per_rad"]
-        line = f"wrote {args.out}: IMU log, axle stiffness front {k['front']:.0f} N/rad, rear {k['rear']:.0f} N/rad"
-        ref = metrics.get("reference_scores")
-        if ref:
-            rm = ref["sideslip_rmse_deg"]
-            line += (f"; sideslip RMSE {rm['observer_online_causal']['whole']:.3f} deg (causal observer), "
-                     f"{rm['linear_kf_baseline']['whole']:.3f} deg (linear KF)")  # fmt: skip
-        print(line)
+        metrics = estimate_imu_log(log, vehicle, args.out, config=config)
+        print(_imu_line(args.out, metrics))
         return 0
-    return _run_camera(log, vehicle, args)
+    return _run_camera(log, vehicle, config, args, why)
 
 
-def _run_camera(log: DrivingLog, vehicle, args) -> int:
+def _imu_line(out: Path, metrics: dict) -> str:
+    line = f"wrote {out}: IMU log"
+    summ = metrics.get("summary", {})
+    if summ:
+        line += "; " + _stiffness_text(summ)
+    ref = metrics.get("reference_scores")
+    if ref and "sideslip_rmse_deg" in ref:
+        parts = [f"{k} {v['whole']:.3f}" for k, v in ref["sideslip_rmse_deg"].items() if isinstance(v, dict) and "whole" in v]
+        line += "; sideslip RMSE [deg]: " + ", ".join(parts)
+    return line
+
+
+def _stiffness_text(summary: dict) -> str:
+    if summary.get("verdict") != "identified":
+        return "stiffness NOT IDENTIFIABLE from this drive (too little excitation or too much noise; see metrics.json)"
+    out = []
+    for a in ("front", "rear"):
+        k = summary.get(f"stiffness_{a}_N_per_rad")
+        band = summary.get(f"stiffness_{a}_2sigma_N_per_rad")
+        if k is None:
+            out.append(f"{a} not identifiable")
+        else:
+            out.append(f"{a} {k:.0f} N/rad (+/-{0.5 * (band[1] - band[0]):.0f}, 2 sigma)")
+    return "stiffness per tire " + ", ".join(out)
+
+
+def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
     from .. import plotting
     from ..metrics import AXLES, compute_metrics, excited_range
-    from ..observer import ObserverConfig, estimate
+    from ..observer import estimate
 
-    rows, dt = camera_sensors(log)
-    frames = np.flatnonzero(np.isfinite(rows["e1"]))
+    frames = np.flatnonzero(np.isfinite(log.sensors["e1"]))
     if len(frames) < 10:
         raise ParameterError(f"{log.source}: only {len(frames)} camera frames; too few to estimate anything")
-    rate = 1.0 / float(np.median(np.diff(rows["t"][frames])))
-    noise = args.camera_noise or (0.0, 0.0)
-    camera = CameraParams(rate=rate, noise="gaussian" if any(noise) else "none", e1_noise=noise[0], e2_noise=noise[1])
-    config = ObserverConfig(basis=args.basis, warm_start=not args.no_warm_start, linear_region_deg=args.linear_region_deg)
-    result = estimate(rows, vehicle, camera, config, physics_dt=dt)
+    rows = {k: v for k, v in log.sensors.items()}
+    result = estimate(rows, vehicle, None, config=config)
     trace = result.trace
+    online = result.online
+    summary = result.summary()
+    calibration = {k: v for k, v in result.calibration.items() if not k.startswith("_")}
+    calibration["sensors_reason"] = why
+    calibration["vehicle_source"] = str(args.vehicle) if args.vehicle else "built-in default (the paper's D-class sedan)"
     metrics: dict = {
         "log": log.source,
         "log_notes": log.notes,
         "rows": len(trace.t),
-        "camera_rate_hz": rate,
+        "summary": summary,
+        "stiffness": result.stiffness_report(),
+        "learned_slip_range_deg": result.learned_slip_range(),
         "cornering_stiffness_estimated": dict(zip(AXLES, result.cornering_stiffness())),
+        "cornering_stiffness_online": dict(zip(AXLES, result.observer.cornering_stiffness(result.online_weights))),
         "excited_slip_range_deg": {
             a: [math.degrees(v) for v in excited_range(trace.slip[:, i])] for i, a in enumerate(AXLES)
         },
-        "innovation_rms": {"e1": float(np.sqrt(np.nanmean(trace.innovation[:, 0] ** 2))),
-                           "e2": float(np.sqrt(np.nanmean(trace.innovation[:, 1] ** 2)))},
-        "diverged": bool(trace.diverged),
+        "innovation_rms": {
+            c: float(np.sqrt(np.nanmean(online.innovation[:, j] ** 2)))
+            for j, c in enumerate(("e1", "e2", "ay", "yaw_rate"))
+            if np.any(np.isfinite(online.innovation[:, j]))
+        },
+        "health": {"final": online.final_health, "fraction": online.health_fraction},
+        "calibration": calibration,
         "lmi": result.gains.summary(),
         "runtime_s": result.runtime_s,
     }
@@ -103,31 +191,56 @@ def _run_camera(log: DrivingLog, vehicle, args) -> int:
             "true_force": np.column_stack([truth["true_Fyf"], truth["true_Fyr"]]),
         }
         true_curve = _empirical_curve(t_truth)
-        metrics["ground_truth"] = compute_metrics(
-            t=trace.t, xi_hat=trace.xi, slip_hat=trace.slip, force_nonlinear_hat=trace.force_nonlinear,
-            truth=t_truth, curve=result.axle_force, true_curve=true_curve,
-            stiffness_hat=result.cornering_stiffness(), stiffness_true=_stiffness_from(true_curve),
-            nominal_stiffness=(vehicle.Cf, vehicle.Cr), lmi=result.gains.summary(), runtime_s=result.runtime_s,
-        )  # fmt: skip
-        metrics["ground_truth"]["note"] = (
-            "true curve = binned mean of the log's true (slip, force) samples; true stiffness = its slope near zero"
-        )
+        stiffness_true = _stiffness_from(true_curve)
+        scores = {}
+        for name, tr, curve, k_hat in (
+            ("offline", trace, result.axle_force, result.cornering_stiffness()),
+            ("online", online, result.online_axle_force, result.observer.cornering_stiffness(result.online_weights)),
+        ):
+            scores[name] = compute_metrics(
+                t=tr.t, xi_hat=tr.xi, slip_hat=tr.slip, force_nonlinear_hat=tr.force_nonlinear,
+                truth=t_truth, curve=curve, true_curve=true_curve, stiffness_hat=k_hat, stiffness_true=stiffness_true,
+                nominal_stiffness=(vehicle.Cf, vehicle.Cr), lmi=result.gains.summary(),
+                runtime_s=result.runtime_s["total"],
+            )  # fmt: skip
+        gt = scores["offline"] if result.offline is not None else scores["online"]
+        gt["online"] = scores["online"]
+        rep = result.stiffness_report()
+        gt["stiffness_inside_2sigma_band"] = {
+            a: bool(rep[a]["band_2sigma_N_per_rad"][0] <= stiffness_true[i] <= rep[a]["band_2sigma_N_per_rad"][1])
+            for i, a in enumerate(AXLES)
+        }
+        gt["note"] = "true curve = binned mean of the log's true (slip, force) samples; true stiffness = its slope near zero"
+        metrics["ground_truth"] = gt
     with atomic_directory(args.out) as out:
-        write_table(out / "estimates.csv", {
-            "t": trace.t, "e1_hat": trace.xi[:, 0], "e1_dot_hat": trace.xi[:, 1], "e2_hat": trace.xi[:, 2],
-            "e2_dot_hat": trace.xi[:, 3], "alpha_f_hat": trace.slip[:, 0], "alpha_r_hat": trace.slip[:, 1],
-            "Fyf_hat": trace.force[:, 0], "Fyr_hat": trace.force[:, 1],
-        })  # fmt: skip
+        cols = {"t": trace.t}
+        names = ("e1_hat", "e1_dot_hat", "e2_hat", "e2_dot_hat")
+        xi = trace.xi
+        for j, c in enumerate(names):
+            cols[c] = xi[:, j]
+        cols.update(alpha_f_hat=trace.slip[:, 0], alpha_r_hat=trace.slip[:, 1], Fyf_hat=trace.force[:, 0],
+                    Fyr_hat=trace.force[:, 1], vy_hat=trace.state[:, 0], yaw_rate_hat=trace.state[:, 1])  # fmt: skip
+        if trace.std.size:
+            cols.update(vy_std=trace.std[:, 0], yaw_rate_std=trace.std[:, 1])
+        cols.update(health=online.health.astype(float), alpha_f_online=online.slip[:, 0], alpha_r_online=online.slip[:, 1])
+        write_table(out / "estimates.csv", cols)
         grid = np.radians(np.linspace(-8, 8, 161))
         write_table(out / "tire_curves.csv", {
-            "alpha": grid, "Fyf": result.axle_force(grid, "front"), "Fyr": result.axle_force(grid, "rear"),
+            "alpha": grid, "Fyf": result.axle_force(grid, "front"), "Fyf_std": result.axle_force_std(grid, "front"),
+            "Fyr": result.axle_force(grid, "rear"), "Fyr_std": result.axle_force_std(grid, "rear"),
+            "Fyf_nominal": result.nominal_axle_force(grid, "front"), "Fyr_nominal": result.nominal_axle_force(grid, "rear"),
         })  # fmt: skip
         atomic_write_json(out / "metrics.json", metrics)
         samples = {a: (trace.slip[:, i], trace.force[:, i]) for i, a in enumerate(AXLES)}
-        plotting.plot_tire_curves({"learned": result.axle_force}, None, metrics["excited_slip_range_deg"], samples,
-                                  title=f"learned tire curves: {Path(log.source).name}", path=out / "tire_curves.png")
-    print(f"wrote {args.out}: stiffness per tire front {result.cornering_stiffness()[0]:.0f} N/rad, "
-          f"rear {result.cornering_stiffness()[1]:.0f} N/rad")
+        curves = {"learned": result.axle_force, "nominal (vehicle file)": result.nominal_axle_force}
+        plotting.plot_tire_curves(curves, None, metrics["excited_slip_range_deg"], samples,
+                                  title=f"learned tire curves: {Path(log.source).name}", path=out / "tire_curves.png",
+                                  bands={"learned": result.axle_force_std})  # fmt: skip
+    line = f"wrote {args.out}: {_stiffness_text(summary)}; health {online.final_health}"
+    lat = calibration.get("latency", {})
+    if lat.get("source", "").startswith("estimated"):
+        line += f"; camera latency estimated {1e3 * lat['latency_s']:.0f} ms"
+    print(line)
     return 0
 
 

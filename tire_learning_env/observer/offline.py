@@ -341,6 +341,8 @@ def stiffness_readout(observer: NeuroAdaptiveObserver, w: NDArray, slip: NDArray
     to within a few hundredths of a percent, and it uses every sample in the range, where
     the slope at zero alone rests on the narrow innermost basis segment.
     """
+    if getattr(observer, "pinned_slip", 0.0) > 0:  # stiffness given: the curve is pinned to it near zero
+        return stiffness_gradient(observer, axle), {"range_deg": None, "method": "slope at zero (stiffness given, pinned)"}
     a = slip[np.isfinite(slip)]
     if len(a) < 10:
         return stiffness_gradient(observer, axle), {"range_deg": None, "method": "slope at zero (no slip data)"}
