@@ -65,8 +65,8 @@ def test_imu_only_log_is_recognised(tmp_path):
 
 def test_atomic_directory_keeps_the_old_results_on_failure(tmp_path):
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "old.txt").write_text("previous results")
+    with atomic_directory(out) as tmp:  # results of an earlier run (the package's own folder)
+        (tmp / "old.txt").write_text("previous results")
     with pytest.raises(RuntimeError):
         with atomic_directory(out) as tmp:
             (tmp / "half.txt").write_text("half written")

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
-from ..io import read_vehicle
+from ..io import read_vehicle, record_run_info
 from ..params import ParameterError, VehicleParams
 
 
@@ -19,7 +20,34 @@ def add_vehicle_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def vehicle_from_args(args: argparse.Namespace) -> VehicleParams:
-    return read_vehicle(args.vehicle)
+    """The vehicle of ``--vehicle`` (or the default sedan), recorded in the output manifest."""
+    vehicle = read_vehicle(args.vehicle)
+    source = str(args.vehicle) if args.vehicle is not None else "default: the paper's D-class sedan"
+    record_run_info("vehicle", {"source": source, "parameters": vehicle.to_dict()})
+    return vehicle
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 (``-5``, ``0``, ``nan``, ``inf`` are refused)."""
+    value = _number(text)
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    """argparse type: a finite number >= 0."""
+    value = _number(text)
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
+    return value
 
 
 def parse_assignments(items: list[str] | None, what: str) -> dict[str, float]:

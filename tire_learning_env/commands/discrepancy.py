@@ -24,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("log", type=Path, help="driving log CSV: a camera log (e1, e2, kappa) or an IMU-only log "
                    "(yaw_rate, ay)")
-    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--out", type=Path, required=True, help="output folder (see --overwrite)")
     p.add_argument("--vehicle", type=Path, default=None,
                    help="nominal vehicle JSON (m, Iz, lf, lr, Cf, Cr, ...); default: the paper's D-class sedan")
     p.add_argument("--tire", choices=["pacejka", "linear", "learned"], default="pacejka",
@@ -44,12 +44,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..io import read_log, read_vehicle
+    from ..io import read_log
+    from ._common import vehicle_from_args
     from ..params import TireParams
     from ..discrepancy import DiscrepancyConfig, analyze, write_report
 
     log = read_log(args.log)  # LogFormatError names what is wrong
-    vehicle = read_vehicle(args.vehicle)  # ParameterError for an unreadable / invalid file
+    vehicle = vehicle_from_args(args)  # ParameterError for an unreadable / invalid file
     overrides = {"use_imu": not args.no_imu, "seed": args.seed, "steering": args.steering}
     if args.window is not None:
         overrides["window"] = args.window

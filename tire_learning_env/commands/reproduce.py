@@ -8,6 +8,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from ._common import positive_float
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -20,13 +22,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     which = p.add_mutually_exclusive_group(required=True)
     which.add_argument("--study", type=int, choices=[1, 2, 3], help="study number")
     which.add_argument("--all", action="store_true", help="every study plus an index report")
-    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--out", type=Path, required=True, help="output folder (see --overwrite)")
     p.add_argument("--baseline", choices=["ukf"], default=None, help="also score the joint UKF baseline")
-    p.add_argument("--camera-rate", type=float, default=None, help="camera frame rate [Hz] (default: the study's)")
+    p.add_argument("--camera-rate", type=positive_float, default=None, help="camera frame rate [Hz] (default: the study's)")
     p.add_argument("--noise", choices=["paper", "none"], default=None,
                    help="camera noise: paper = uniform +/-1 cm, +/-1 deg (default: the study's)")
     p.add_argument("--basis", choices=["two_sided", "paper"], default=None, help="activation basis preset")
-    p.add_argument("--duration", type=float, default=None, help="simulated time [s] (default 60)")
+    p.add_argument("--duration", type=positive_float, default=None, help="simulated time [s] (default 60)")
     p.add_argument("--seed", type=int, default=None, help="noise seed")
     p.set_defaults(func=run)
 

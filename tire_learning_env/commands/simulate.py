@@ -13,7 +13,7 @@ from ..params import CameraParams, ParameterError, TireParams
 from ..roads import BUILTIN_ROADS
 from ..simulation import simulate
 from ..tires import axle_tires
-from ._common import add_vehicle_argument, parse_assignments, vehicle_from_args
+from ._common import add_vehicle_argument, non_negative_float, parse_assignments, positive_float, vehicle_from_args
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -25,28 +25,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--road", default="study1", choices=sorted(BUILTIN_ROADS) + sorted(DISCREPANCY_ROADS),
                    help="built-in road (default study1); identification = curves both ways + six lane changes, "
                    "repeating every 1800 m")
-    p.add_argument("--duration", type=float, default=60.0, help="simulated time [s] (default 60)")
+    p.add_argument("--duration", type=positive_float, default=60.0, help="simulated time [s] (default 60)")
     p.add_argument("--tire", choices=["pacejka", "linear"], default="pacejka", help="truth tire model")
-    p.add_argument("--mu", type=float, default=TireParams().mu, help="Pacejka friction coefficient")
-    p.add_argument("--physics-rate", type=float, default=1000.0, help="integration rate [Hz]")
-    p.add_argument("--log-rate", type=float, default=100.0, help="rate of the written rows [Hz] (frames are kept)")
-    p.add_argument("--camera-rate", type=float, default=100.0, help="camera frame rate [Hz]")
+    p.add_argument("--mu", type=positive_float, default=TireParams().mu, help="Pacejka friction coefficient")
+    p.add_argument("--physics-rate", type=positive_float, default=1000.0, help="integration rate [Hz]")
+    p.add_argument("--log-rate", type=positive_float, default=100.0, help="rate of the written rows [Hz] (frames are kept)")
+    p.add_argument("--camera-rate", type=positive_float, default=100.0, help="camera frame rate [Hz]")
     p.add_argument("--noise", choices=["none", "paper", "uniform", "gaussian"], default="none",
                    help="camera noise: paper = uniform +/-1 cm, +/-1 deg")
-    p.add_argument("--e1-noise", type=float, default=0.01, help="e1 noise half-width/std [m]")
-    p.add_argument("--e2-noise", type=float, default=math.radians(0.1), help="e2 noise half-width/std [rad]")
+    p.add_argument("--e1-noise", type=non_negative_float, default=0.01, help="e1 noise half-width/std [m]")
+    p.add_argument("--e2-noise", type=non_negative_float, default=math.radians(0.1), help="e2 noise half-width/std [rad]")
     p.add_argument("--effect", action="append", metavar="NAME=VALUE",
                    help="hidden physical effect in the truth model (repeatable): "
                    + "; ".join(f"{k} [{v[2]}]" for k, v in HIDDEN_EFFECTS.items())
-                   + ". PlantEffects field names (" + ", ".join(PlantEffects.__dataclass_fields__)
+                   + ". PlantEffects field names (" + ", ".join(f for f in PlantEffects.__dataclass_fields__ if not f.startswith("_"))
                    + ") and camera_latency / e1_bias / e2_bias also work")
     p.add_argument("--speed-profile", choices=sorted(SPEED_PROFILES), default="constant",
                    help="speed over time (v0 = the vehicle's vx): " + "; ".join(f"{k}: {v}" for k, v in SPEED_PROFILES.items()))
     p.add_argument("--seed", type=int, default=0, help="noise seed")
     p.add_argument("--no-truth", action="store_true", help="omit the true_* columns")
-    p.add_argument("--out", type=Path, required=True, help="output CSV")
+    p.add_argument("--out", "--log", dest="out", type=Path, required=True,
+                   help="output log: one CSV FILE (not a folder, unlike the other commands' --out). An existing "
+                   "file is refused unless --overwrite is given")
     add_vehicle_argument(p)
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="file")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -69,6 +71,9 @@ def run(args: argparse.Namespace) -> int:
     cols = log.to_columns(include_truth=not args.no_truth)
     step = max(int(round(args.physics_rate / args.log_rate)), 1)
     keep = _rows_to_keep(cols["e1"], step)
+    from ..io import check_output_file, current_run_context
+
+    check_output_file(args.out, bool(getattr(args, "overwrite", False)), current_run_context().inputs)  # again, just before
     write_log(args.out, {k: v[keep] for k, v in cols.items()})
     print(f"wrote {keep.sum()} rows ({args.duration:g} s, {args.road}) to {args.out}")
     return 0
