@@ -69,16 +69,19 @@ def nominal_tires(
     """Front/rear axle tires of the nominal model and a description.
 
     ``learned`` runs the neuro-adaptive observer on the log (:func:`~tire_learning_env.observer.estimate`;
-    for an IMU-only log the IMU variant :func:`~tire_learning_env.imu.estimate_imu`) and uses the
-    learned axle curves (final pass). Only the curves are used: the observer's state
-    estimates (e.g. its causal sideslip) never enter the comparison.
+    for an IMU-only log with ``sensors="imu"`` and the IMU noise measured by
+    :func:`~tire_learning_env.imu.imu_noise_std`) and uses the learned axle curves (refined
+    pass). Only the curves are used: the observer's state estimates (e.g. its causal
+    sideslip) never enter the comparison.
     """
     if tire == "learned" and log.kind == "imu":
-        from ..imu import ImuConfig, estimate_imu
+        from ..imu import imu_noise_std
+        from ..observer import ObserverConfig, estimate
 
         s = log.sensors
         rows = {k: np.asarray(s[k], dtype=float) for k in ("t", "delta", "vx", "ay", "yaw_rate")}
-        result = estimate_imu(rows, vehicle, ImuConfig())
+        noise, _ = imu_noise_std(rows["t"], rows["ay"], rows["yaw_rate"])
+        result = estimate(rows, vehicle, config=ObserverConfig(sensors="imu", imu_noise=noise))
         cf, cr = result.cornering_stiffness()
         front = CallableTire(lambda a: result.axle_force(a, "front"), "learned front (IMU observer)")
         rear = CallableTire(lambda a: result.axle_force(a, "rear"), "learned rear (IMU observer)")
@@ -86,8 +89,8 @@ def nominal_tires(
         secant = {a: float((result.axle_force(h, a) - result.axle_force(-h, a)) / (2 * h)) for a in ("front", "rear")}
         return front, rear, {
             "kind": "learned",
-            "learner": "IMU neuro-adaptive observer (tire_learning_env.imu.estimate_imu), final warm-started pass; "
-            "only its axle curves are used, never its state estimates",
+            "learner": "neuro-adaptive observer on the IMU (tire_learning_env.observer.estimate, sensors='imu'), "
+            "refined curves; only its axle curves are used, never its state estimates",
             "cornering_stiffness_per_tire": {"front": cf, "rear": cr},
             "secant_pm1deg_per_axle_N_per_rad": secant,
         }

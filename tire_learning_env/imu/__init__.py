@@ -1,41 +1,41 @@
-"""IMU measurement variant of the neuro-adaptive observer (yaw rate and lateral acceleration).
+"""IMU-only logs (yaw rate and lateral acceleration, no lane camera) on the unified estimator core.
 
-- :mod:`.model`: body-coordinate bicycle model ``[vy, r]``, ``a_y`` as a force feedthrough.
-- :mod:`.gains`: speed-scheduled gains from vertex LMIs over a speed polytope, common
-  Lyapunov matrix, numpy certificate, disk cache.
-- :mod:`.observer`: the compiled observer (sensitivity-RLS weights, direct ``a_y`` term).
-- :mod:`.kalman`: the source paper's linear Kalman filter (peer baseline).
+The estimator itself is :mod:`tire_learning_env.observer` with ``sensors="imu"``; this
+package is the IMU *log layer*:
+
 - :mod:`.logs`: checks and causal cleaning of real IMU logs, reported.
+- :mod:`.estimate`: :func:`estimate_imu` (noise, observer, linear KF, blend) and
+  :func:`estimate_imu_log` (the ``estimate`` command: scores and files).
+- :mod:`.blend`: interacting-multiple-model weighting of the observer and the linear KF by
+  their innovations (never worse than the KF where the prediction errors tell them apart).
 - :mod:`.scoring`: sideslip RMSE and measured tire curves from a reference sensor.
-- :mod:`.estimate`: :func:`estimate_imu` and :func:`estimate_imu_log` (the ``estimate`` command).
 - :mod:`.simulate`: simulated IMU drives (Pacejka truth, varying speed) for tests.
+- :mod:`.plots`: figures of the ``estimate`` command.
+
+The linear Kalman filter lives in :mod:`tire_learning_env.baselines.kalman` (re-exported here).
 """
 
-from .estimate import ESTIMATE_COLUMNS, ImuConfig, ImuResult, build_imu_observer, estimate_imu, estimate_imu_log, imu_basis
-from .gains import ImuGains, InfeasibleLMIError, synthesize_imu_gains
-from .kalman import LinearKalmanBaseline
+from ..baselines.kalman import LinearKalmanBaseline, LinearKalmanFilter
+from .blend import Blend, BlendParams, blend_traces, mode_probabilities
+from .estimate import ESTIMATE_COLUMNS, ImuEstimate, estimate_imu, estimate_imu_log, imu_config, imu_noise_std
 from .logs import CleaningReport, clean_imu_log, read_imu_log
-from .model import BodyState
-from .observer import ImuObserver, ImuTrace
 from .simulate import simulate_imu_drive
 
 __all__ = [
     "ESTIMATE_COLUMNS",
-    "ImuConfig",
-    "ImuResult",
-    "build_imu_observer",
+    "ImuEstimate",
     "estimate_imu",
     "estimate_imu_log",
-    "imu_basis",
-    "ImuGains",
-    "InfeasibleLMIError",
-    "synthesize_imu_gains",
+    "imu_config",
+    "imu_noise_std",
+    "Blend",
+    "BlendParams",
+    "blend_traces",
+    "mode_probabilities",
+    "LinearKalmanFilter",
     "LinearKalmanBaseline",
     "CleaningReport",
     "clean_imu_log",
     "read_imu_log",
-    "BodyState",
-    "ImuObserver",
-    "ImuTrace",
     "simulate_imu_drive",
 ]

@@ -1,356 +1,308 @@
-"""One-call IMU estimation: configuration, certified gains, observer passes, baseline, scores, files.
+r"""IMU logs on the unified estimator core: noise, observer, linear KF, their blend, scores, files.
 
 >>> from tire_learning_env.params import VehicleParams
->>> from tire_learning_env.imu import ImuConfig, estimate_imu, simulate_imu_drive
+>>> from tire_learning_env.imu import estimate_imu, simulate_imu_drive
 >>> vehicle = VehicleParams(m=982, Iz=1605, lf=1.33, lr=1.07, Cf=35000, Cr=60000)
 >>> sensors, truth, tires = simulate_imu_drive(vehicle, duration=30.0)
->>> result = estimate_imu(sensors, vehicle, ImuConfig(warm_start=False))
->>> bool(result.gains.certified)
-True
+>>> result = estimate_imu(sensors, vehicle)
+>>> result.core.sensors, bool(result.core.gains.certified)
+('imu', True)
+
+Steps of :func:`estimate_imu` (the ``estimate`` command runs :func:`estimate_imu_log`):
+
+1. **Noise** of ``a_y`` and ``r`` from the log (:func:`imu_noise_std`): residuals of local
+   polynomial fits over 0.1 s. The bicycle model explains the car's motion up to a few hertz;
+   whatever is faster in the accelerometer (engine and road vibration, often band-limited
+   at tens of hertz, not white) is noise *for the model*. The core's default window of 9
+   samples sees only the top of the band at 200 Hz (1.7 instead of 4.5 m/s^2 on a
+   15-45 Hz vibration), so the log layer measures over a fixed time span instead and hands
+   the result to the core as the IMU noise.
+2. **The neuro-adaptive observer** (:func:`tire_learning_env.observer.estimate` with
+   ``sensors="imu"``): certified gains for that noise and the log's speed range, causal
+   pass, offline refinement over the whole log, stiffness with its two-sigma band, verdict.
+3. **The linear Kalman filter** (:class:`~tire_learning_env.baselines.LinearKalmanFilter`)
+   with the same measured noise.
+4. **Blend** (:mod:`.blend`): interacting-multiple-model probabilities of the two from their
+   ``a_y``/``r`` innovations; the reported states are the mixture, so wherever the learned
+   curve predicts the IMU worse than fixed linear tires the estimate falls back to the KF.
+   Done for the causal pass (``online``) and for the refined pass (reported).
 """
 
 from __future__ import annotations
 
+import inspect
 import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import Mapping
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
+from ..baselines.kalman import LinearKalmanFilter
 from ..io import DrivingLog, atomic_directory, atomic_write_json, write_table
-from ..metrics import AXLES
-from ..observer.basis import SoftClipBasis, two_sided_basis
-from ..observer.warm_start import least_squares_weights
-from ..params import ParameterError, VehicleParams, _Params
-from .gains import ImuGains, synthesize_imu_gains
-from .kalman import KalmanTrace, LinearKalmanBaseline
+from ..observer import EstimateTrace, EstimationResult, ObserverConfig, estimate
+from ..observer.calibration import estimate_noise_std
+from ..params import ParameterError, VehicleParams
+from .blend import Blend, BlendParams, blend_traces
 from .logs import CleaningReport, clean_imu_log
-from .observer import ImuObserver, ImuTrace, compile_kernel
 
-__all__ = ["ImuConfig", "imu_basis", "build_imu_observer", "estimate_imu", "ImuResult", "estimate_imu_log", "ESTIMATE_COLUMNS"]
+__all__ = ["ESTIMATE_COLUMNS", "NOISE_WINDOW_S", "ImuEstimate", "imu_config", "imu_noise_std", "estimate_imu",
+           "estimate_imu_log"]  # fmt: skip
 
-#: the first columns of ``estimates.csv``, in this order
+#: the first columns of ``estimates.csv``, in this order (the reported, blended estimate)
 ESTIMATE_COLUMNS = ("t", "beta_hat", "vy_hat", "yaw_rate_hat", "alpha_f_hat", "alpha_r_hat", "Fyf_hat", "Fyr_hat")
+#: time span of the local polynomial fits that measure the IMU noise [s]
+NOISE_WINDOW_S = 0.1
+AXLES = ("front", "rear")
+_COLUMNS = ("t", "delta", "vx", "ax", "ay", "yaw_rate")
 
 
-@dataclass(frozen=True)
-class ImuConfig(_Params):
-    """Everything that defines an IMU observer run. Defaults are physical, not fitted to a log.
-
-    Parameters
-    ----------
-    speed_lo, speed_hi : float
-        Certified speed range [m/s] (15-65 covers the Revs log's 16-61 m/s with margin).
-    n_cells : int
-        Speed cells of the gain schedule (geometric).
-    slope_fraction_lo, slope_fraction_hi : float
-        Certified true axle slope as a fraction of the nominal ``2 C``; also the learned
-        curve's slope range (weights ``W in [lo - 1, hi - 1]``), so every curve the
-        observer can learn lies in the certified class. ``0.1``: down to 10 % of the
-        nominal stiffness, i.e. close to full saturation (a racing car at the limit);
-        exactly 0 on both axles is unobservable (see :mod:`.gains`).
-    max_steer : float
-        Largest road-wheel angle covered by the certificate [rad].
-    decay_rate : float
-        Required certified decay rate at the worst vertex [1/s].
-    ay_noise, yaw_rate_noise : float
-        IMU noise std [m/s^2], [rad/s] (vibration of a racing car's accelerometer is about
-        1 m/s^2; a MEMS/FOG gyro with body motion about 0.005 rad/s).
-    force_error_scale : float
-        Force error the gains reject [N] (about 10 % of the static axle loads of a 1 t car).
-    initial_std, random_walk, max_std : float
-        Weight regression prior std, random walk [1/sqrt(s)], cap, in units of the weight range.
-    warm_start : bool
-        Second pass from least-squares weights of the first (SPEC §4; uses the whole log:
-        not causal, reported separately from the causal first pass).
-    linear_region_deg : float
-        Warm start: ``f_hat`` zeroed below this slip [deg]; 0 because a real car's nominal
-        stiffness is not trusted.
-    kf_steer_noise : float
-        Process noise of the linear Kalman baseline [rad of equivalent steering].
-    max_steer_rate, max_yaw_accel, max_abs_ay : float
-        Log cleaning bounds (:func:`.logs.clean_imu_log`).
-    """
-
-    speed_lo: float = 15.0
-    speed_hi: float = 65.0
-    n_cells: int = 10
-    slope_fraction_lo: float = 0.1
-    slope_fraction_hi: float = 1.5
-    max_steer: float = 0.3
-    decay_rate: float = 0.1
-    ay_noise: float = 1.0
-    yaw_rate_noise: float = 0.005
-    force_error_scale: float = 500.0
-    initial_std: float = 0.25
-    random_walk: float = 0.0
-    max_std: float = 1.0
-    warm_start: bool = True
-    linear_region_deg: float = 0.0
-    kf_steer_noise: float = 0.01
-    max_steer_rate: float = 2.0
-    max_yaw_accel: float = 20.0
-    max_abs_ay: float = 30.0
-
-    _positive: ClassVar[tuple[str, ...]] = (
-        "speed_lo", "speed_hi", "n_cells", "slope_fraction_hi", "max_steer", "ay_noise", "yaw_rate_noise",
-        "force_error_scale", "initial_std", "max_std", "kf_steer_noise", "max_steer_rate", "max_yaw_accel",
-        "max_abs_ay",
-    )  # fmt: skip
-    _non_negative: ClassVar[tuple[str, ...]] = ("slope_fraction_lo", "decay_rate", "random_walk", "linear_region_deg")
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if not self.speed_lo < self.speed_hi:
-            raise ParameterError(f"ImuConfig: speed_lo ({self.speed_lo}) must be < speed_hi ({self.speed_hi})")
-        if not self.slope_fraction_lo < 1.0 < self.slope_fraction_hi:
-            raise ParameterError("ImuConfig: need slope_fraction_lo < 1 < slope_fraction_hi (nominal slope inside)")
-        if int(self.n_cells) != self.n_cells:
-            raise ParameterError(f"ImuConfig.n_cells must be an integer, got {self.n_cells!r}")
-
-
-def imu_basis(vehicle: VehicleParams, config: ImuConfig | None = None) -> SoftClipBasis:
-    """The camera variant's two-sided segment basis without the bias member.
-
-    Weights are fractions of the nominal axle stiffness in ``[lo - 1, hi - 1]`` (slope of
-    the learned curve between ``lo`` and ``hi`` times nominal on every segment). No bias
-    (constant force) member: with ``(a_y, r)`` only, a force offset at zero slip cannot be
-    told apart from a sideslip offset (shifting both axle curves by the same slip leaves
-    every measured force and the known slip difference ``delta - L r / vx`` unchanged),
-    so the physical prior ``F(0) = 0`` is imposed instead of learned.
-    """
-    config = config or ImuConfig()
-    full = two_sided_basis(
-        vehicle, slope_range=(config.slope_fraction_lo - 1.0, config.slope_fraction_hi - 1.0), bias_bound=0.0
-    )
-    seg = slice(0, full.n_per_axle - 1)  # drop the bias member (last column)
-    return SoftClipBasis(
-        full.lower[:, seg], full.upper[:, seg], full.sharpness, full.scale,
-        (full.weight_lower[:, seg], full.weight_upper[:, seg]), "imu_two_sided", offset=full.offset[:, seg],
-    )  # fmt: skip
-
-
-def build_imu_observer(
-    vehicle: VehicleParams,
-    dt: float,
-    config: ImuConfig | None = None,
-    basis: SoftClipBasis | None = None,
-    initial_weights: NDArray | None = None,
-    cache: bool = True,
-) -> ImuObserver:
-    """Certified gains (solved or loaded from the cache and re-certified) and the observer."""
-    config = config or ImuConfig()
-    basis = basis or imu_basis(vehicle, config)
-    gains = synthesize_imu_gains(
-        vehicle, dt, speed_range=(config.speed_lo, config.speed_hi), n_cells=int(config.n_cells),
-        slope_fractions=(config.slope_fraction_lo, config.slope_fraction_hi), max_steer=config.max_steer,
-        decay_rate=config.decay_rate, noise_std=(config.ay_noise, config.yaw_rate_noise),
-        force_error_scale=config.force_error_scale, cache=cache,
-    )  # fmt: skip
-    _check_basis_in_box(basis, gains, vehicle)
-    return ImuObserver(
-        vehicle, basis, gains, noise_std=(config.ay_noise, config.yaw_rate_noise), initial_std=config.initial_std,
-        random_walk=config.random_walk, max_std=config.max_std, initial_weights=initial_weights,
-    )  # fmt: skip
-
-
-def _check_basis_in_box(basis: SoftClipBasis, gains: ImuGains, vehicle: VehicleParams) -> None:
-    """Every learnable curve's total slope must lie in the certified box (up to ``cos(max_steer)``).
-
-    For segments that form one contiguous chain ``b_0 < b_1 < ... < b_K`` the slopes of the
-    soft clips telescope, ``sum_j sigma_j'(a) = s(lam (a - b_0)) - s(lam (a - b_K)) <= 1``
-    (``s`` the logistic function), so the learned slope lies in
-    ``2 C + gamma [min W_lo, max W_hi]`` exactly; otherwise the basis' gridded bound is used.
-    """
-    c2 = np.array([2.0 * vehicle.Cf, 2.0 * vehicle.Cr])
-    nl = np.empty((2, 2))
-    for i in (0, 1):
-        order = np.argsort(basis.lower[i])
-        lo, hi = basis.lower[i][order], basis.upper[i][order]
-        if np.all(hi > lo) and np.allclose(hi[:-1], lo[1:]):
-            nl[i] = basis.scale[i] * np.array([min(basis.weight_lower[i].min(), 0.0), max(basis.weight_upper[i].max(), 0.0)])
-        else:
-            nl[i] = basis.force_slope_bounds(margin=0.0)[i]
-    total = nl + c2[:, None]
-    box = gains.slope_box.copy()
-    box[0, 0] /= math.cos(gains.settings["max_steer"])  # the box's front bound includes cos(delta)
-    tol = 1e-3 * c2
-    if np.any(total[:, 0] < box[:, 0] - tol) or np.any(total[:, 1] > box[:, 1] + tol):
+def imu_config(config: ObserverConfig | None = None) -> ObserverConfig:
+    """``config`` (default :class:`ObserverConfig`) with ``sensors="imu"``; the IMU-only
+    basis is the two-sided one (the paper's cannot be told from a sideslip offset)."""
+    config = config or ObserverConfig(sensors="imu")
+    if config.sensors != "imu":
+        config = config.replace(sensors="imu")
+    if config.basis != "two_sided":
         raise ParameterError(
-            f"the basis can learn axle slopes {total.round(0).tolist()} N/rad outside the certified box "
-            f"{box.round(0).tolist()} N/rad: widen the slope fractions or narrow the weight bounds"
+            f"basis {config.basis!r} is not available for IMU logs: the paper's basis is one-sided (flat for negative "
+            "slip) and carries bias members that an IMU cannot tell from a sideslip offset; use 'two_sided'"
         )
+    return config
+
+
+def imu_noise_std(t: ArrayLike, ay: ArrayLike, yaw_rate: ArrayLike, window_s: float = NOISE_WINDOW_S) -> tuple[tuple[float, float], dict]:
+    """Noise std of ``a_y`` [m/s^2] and ``r`` [rad/s]: everything faster than the vehicle's motion.
+
+    Local polynomial residuals (:func:`~tire_learning_env.observer.calibration.estimate_noise_std`,
+    degree 4) over windows of ``window_s`` seconds (at least 9 samples), so band-limited
+    vibration counts in full at any sample rate (module docstring).
+
+    Returns
+    -------
+    (ay_std, r_std), info
+        ``info`` says how, for ``metrics.json``.
+    """
+    t = np.asarray(t, dtype=float)
+    dt = float(np.median(np.diff(t)))
+    window = max(9, int(round(window_s / dt)) | 1)
+    est = {name: estimate_noise_std(t, z, window=window) for name, z in (("ay", ay), ("yaw_rate", yaw_rate))}
+    default = {"ay": 0.5, "yaw_rate": 0.005}
+    std = tuple(float(e.std) if math.isfinite(e.std) else default[k] for k, e in est.items())
+    info = {
+        "source": f"estimated from the log by the IMU log layer: residuals of local degree-4 polynomial fits over "
+        f"{window} samples ({window * dt:.3g} s); what the vehicle motion cannot explain",
+        "window_samples": window,
+        "channels": {k: e.to_dict() for k, e in est.items()},
+        "std": list(std),
+    }
+    return (std[0], std[1]), info
 
 
 @dataclass
-class ImuResult:
+class ImuEstimate:
     """What :func:`estimate_imu` returns.
 
     Attributes
     ----------
-    online : ImuTrace
-        Causal first pass from zero weights (what the car learns on line).
-    final : ImuTrace
-        Warm-started second pass (``online`` itself without warm start).
-    nominal : ImuTrace
-        Same gains, weights frozen at zero (the nominal linear tire): what learning adds.
-    kalman : KalmanTrace
-        Linear Kalman peer baseline.
-    observer : ImuObserver
-        At the end of the final pass (its weights are the learned curve).
-    online_weights : ndarray
-        Weights at the end of the causal pass.
-    initial_weights : ndarray or None
-        Least-squares warm-start weights.
+    core : EstimationResult
+        The unified core's result: ``online`` (causal) and ``trace`` (refined) passes, learned
+        curves, ``cornering_stiffness()`` with ``cornering_stiffness_std()``, ``verdict``,
+        ``calibration``, gains.
+    kalman : EstimateTrace
+        The linear Kalman filter over the same rows.
+    kalman_filter : LinearKalmanFilter
+    blend : Blend
+        Mixture of the refined observer pass and the KF: the reported states.
+    blend_online : Blend
+        Mixture of the causal observer pass and the KF (what a car gets on line).
+    noise : dict
+        How the IMU noise was obtained.
     runtime_s : dict
-        Wall times [s]: ``online_pass``, ``warm_start_pass``, ``nominal_pass``, ``kalman``, ``gains``,
-        ``jit_compile_or_load``.
+        Wall times [s].
     """
 
-    online: ImuTrace
-    final: ImuTrace
-    nominal: ImuTrace
-    kalman: KalmanTrace
-    observer: ImuObserver
-    gains: ImuGains
-    online_weights: NDArray
-    initial_weights: NDArray | None
+    core: EstimationResult
+    kalman: EstimateTrace
+    kalman_filter: LinearKalmanFilter
+    blend: Blend
+    blend_online: Blend
+    noise: dict
     runtime_s: dict
-    kalman_settings: dict
+    blend_params: BlendParams = BlendParams()
 
-    def axle_force(self, alpha, axle: str) -> NDArray:
-        """Learned total axle force [N] (final weights)."""
-        return self.observer.axle_force(alpha, axle)
+    @property
+    def online(self) -> EstimateTrace:
+        """The observer's causal pass."""
+        return self.core.online
 
-    def online_axle_force(self, alpha, axle: str) -> NDArray:
-        """Axle force [N] with the weights at the end of the causal pass."""
-        return self.observer.axle_force(alpha, axle, weights=self.online_weights)
+    @property
+    def trace(self) -> EstimateTrace:
+        """The observer's refined pass (the causal one without offline refinement)."""
+        return self.core.trace
 
-    def curve_at(self, k: int):
-        """The online curve with the weights held at row ``k`` of the causal pass."""
-        w = self.online.weights[k]
-        return lambda alpha, axle: self.observer.axle_force(alpha, axle, weights=w)
+    @property
+    def gains(self):
+        return self.core.gains
 
-    def nominal_axle_force(self, alpha, axle: str) -> NDArray:
-        v = self.observer.vehicle
-        return 2.0 * (v.Cf if axle == "front" else v.Cr) * np.asarray(alpha, dtype=float)
+    def axle_force(self, alpha: ArrayLike, axle: str) -> NDArray:
+        """Learned total axle force [N] (the refined curve)."""
+        return self.core.axle_force(alpha, axle)
 
-    def cornering_stiffness(self, weights: NDArray | None = None) -> tuple[float, float]:
-        """Per-tire stiffness [N/rad] at zero slip (final weights by default)."""
-        return self.observer.cornering_stiffness(weights)
+    def axle_force_std(self, alpha: ArrayLike, axle: str) -> NDArray:
+        """Standard deviation of :meth:`axle_force` [N]."""
+        return self.core.axle_force_std(alpha, axle)
+
+    def online_axle_force(self, alpha: ArrayLike, axle: str) -> NDArray:
+        """The curve at the end of the causal pass [N]."""
+        return self.core.online_axle_force(alpha, axle)
+
+    def nominal_axle_force(self, alpha: ArrayLike, axle: str) -> NDArray:
+        """The vehicle file's linear curve ``2 C alpha`` [N] (the KF's)."""
+        return self.core.nominal_axle_force(alpha, axle)
+
+    def cornering_stiffness(self) -> tuple[float, float]:
+        """Per-tire cornering stiffness of the learned curves [N/rad]."""
+        return self.core.cornering_stiffness()
 
 
-def _imu_rows(sensors: dict) -> dict:
-    missing = [k for k in ("t", "delta", "vx", "ay", "yaw_rate") if k not in sensors]
-    if missing:
-        raise ParameterError(f"IMU estimation needs sensor columns {missing}")
-    return {k: np.asarray(sensors[k], dtype=float) for k in ("t", "delta", "vx", "ay", "yaw_rate")}
-
-
-def estimate_imu(sensors: dict, vehicle: VehicleParams, config: ImuConfig | None = None, cache: bool = True) -> ImuResult:
-    """Run the IMU observer over logged rows (causal pass, optional warm-started pass), a
-    fixed-nominal-curve pass and the linear Kalman baseline.
-
-    ``sensors`` holds ``t, delta, vx, ay, yaw_rate`` (no ``true_*``; refused).
-    """
-    config = config or ImuConfig()
+def _rows(sensors: Mapping[str, ArrayLike]) -> dict[str, NDArray]:
     leaked = [k for k in sensors if str(k).startswith("true")]
     if leaked:
         raise ValueError(f"estimators must not see ground truth; got columns {leaked}")
-    rows = _imu_rows(sensors)
-    t = rows["t"]
-    if len(t) < 3:
-        raise ParameterError("need at least three rows to estimate")
-    dt = float(f"{float(np.median(np.diff(t))):.9g}")  # 0.00999999999999 -> 0.01 (one cache entry per rate)
-    t0 = time.perf_counter()
-    observer = build_imu_observer(vehicle, dt, config, cache=cache)
-    t_gains = time.perf_counter() - t0
-    runtime: dict = {"gains": t_gains}
-    t0 = time.perf_counter()
-    compile_kernel(observer)
-    LinearKalmanBaseline(vehicle).run({k: v[:3] for k, v in rows.items()})
-    runtime["jit_compile_or_load"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    online = observer.run(rows)
-    runtime["online_pass"] = time.perf_counter() - t0
-    online_w = observer.weights
-    w0 = None
-    final = online
-    if config.warm_start:
+    missing = [k for k in ("t", "delta", "vx", "ay", "yaw_rate") if k not in sensors]
+    if missing:
+        raise ParameterError(f"IMU estimation needs sensor columns {missing}")
+    rows = {k: np.asarray(sensors[k], dtype=float) for k in _COLUMNS if k in sensors}
+    rows.setdefault("ax", np.zeros_like(rows["t"]))
+    return rows
+
+
+def estimate_imu(
+    sensors: Mapping[str, ArrayLike],
+    vehicle: VehicleParams,
+    config: ObserverConfig | None = None,
+    blend: BlendParams | None = None,
+    cache: bool = True,
+) -> ImuEstimate:
+    """Estimate states and tire curves from IMU rows (module docstring).
+
+    Parameters
+    ----------
+    sensors : mapping of str -> array
+        ``t, delta, vx, ay, yaw_rate`` (``ax`` optional); NaN = no sample. No ``true_*``.
+    vehicle : VehicleParams
+        The vehicle file (its ``Cf``, ``Cr`` are the starting curve and the KF's tires).
+    config : ObserverConfig, optional
+        ``sensors`` is set to ``imu``; ``imu_noise`` given there is used instead of measured.
+    blend : BlendParams, optional
+    cache : bool
+        Disk cache of the certified gains.
+    """
+    config = imu_config(config)
+    rows = _rows(sensors)
+    t_all = time.perf_counter()
+    runtime: dict = {}
+    if config.imu_noise is None:
         t0 = time.perf_counter()
-        w0 = least_squares_weights(observer.basis, online, linear_region=math.radians(config.linear_region_deg))
-        observer.reset(weights=w0)
-        observer._started = False
-        final = observer.run(rows)
-        runtime["warm_start_pass"] = time.perf_counter() - t0
-    nominal_obs = ImuObserver(
-        vehicle, observer.basis, observer.gains, noise_std=(config.ay_noise, config.yaw_rate_noise), adapt=False
-    )
+        noise, noise_info = imu_noise_std(rows["t"], rows["ay"], rows["yaw_rate"])
+        config = config.replace(imu_noise=noise)
+        runtime["noise"] = time.perf_counter() - t0
+    else:
+        noise = tuple(config.imu_noise)
+        noise_info = {"source": "given (ObserverConfig.imu_noise)", "std": list(noise)}
+    noise_used = (max(noise[0], 0.01), max(noise[1], 1e-4))  # the core's floors
+    core = estimate(rows, vehicle, config=config, cache=cache)
+    runtime["observer"] = core.runtime_s
+    dt = float(np.median(np.diff(rows["t"])))
     t0 = time.perf_counter()
-    nominal = nominal_obs.run(rows)
-    runtime["nominal_pass"] = time.perf_counter() - t0
-    kf = LinearKalmanBaseline(vehicle, steer_noise=config.kf_steer_noise, noise_std=(config.ay_noise, config.yaw_rate_noise))
-    t0 = time.perf_counter()
+    kf = LinearKalmanFilter(vehicle, noise_std=noise_used, physics_dt=dt)
     ktrace = kf.run(rows)
-    runtime["kalman"] = time.perf_counter() - t0
-    return ImuResult(online, final, nominal, ktrace, observer, observer.gains, online_w, w0, runtime, kf.settings())
+    runtime["linear_kf"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    params = blend or BlendParams()
+    b_final = blend_traces(core.trace, ktrace, params)
+    b_online = blend_traces(core.online, ktrace, params)
+    runtime["blend"] = time.perf_counter() - t0
+    runtime["total"] = time.perf_counter() - t_all
+    return ImuEstimate(core, ktrace, kf, b_final, b_online, noise_info, runtime, params)
 
 
-# -- the estimate command's IMU branch ----------------------------------------------------------
+# -- the estimate command on an IMU log -------------------------------------------------------------
 def estimate_imu_log(
     log: DrivingLog,
     vehicle: VehicleParams,
     out: str | Path,
-    basis: str = "two_sided",
-    warm_start: bool = True,
-    config: ImuConfig | None = None,
+    config: ObserverConfig | None = None,
+    *,
+    blend: BlendParams | None = None,
     cache: bool = True,
+    basis: str | None = None,
+    warm_start: bool | None = None,
 ) -> dict:
-    """Clean an IMU-only log, estimate, score against a reference sensor if present, write ``out``.
+    """Clean an IMU log, estimate (:func:`estimate_imu`), score against a reference sensor when
+    the log has one, and write ``out`` atomically.
 
-    Writes (``out`` replaced atomically):
+    Parameters
+    ----------
+    log : DrivingLog
+        From :func:`tire_learning_env.io.read_log` (``kind == "imu"``; ``true_*`` kept apart).
+    vehicle : VehicleParams
+    out : path
+        Output folder (written through :func:`tire_learning_env.io.atomic_directory`).
+    config : ObserverConfig, optional
+        ``sensors`` is set to ``imu``.
+    blend : BlendParams, optional
+    cache : bool
+    basis, warm_start : optional
+        Former keywords of the ``estimate`` command: ``basis`` sets ``config.basis`` (only
+        ``two_sided``), ``warm_start=False`` turns the offline refinement off.
 
-    - ``estimates.csv``: ``t, beta_hat, vy_hat, yaw_rate_hat, alpha_f_hat, alpha_r_hat,
-      Fyf_hat, Fyr_hat`` of the final pass, then ``beta_hat_online`` (the causal pass) and
-      ``beta_kf`` (linear Kalman baseline);
-    - ``tire_curves.csv`` (learned, online, nominal and, with a reference, measured curves)
-      and ``tire_curves.png``, ``tire_curve_front.png``, ``tire_curve_rear.png``
-      (measured and estimated clouds with the curves, one figure per axle),
-      ``sideslip.png``, ``weights.png``;
-    - ``metrics.json``: cleaning, LMI certificate over the speed range, stiffness,
-      runtime, and (with ``true_vy``/``true_beta``) sideslip RMSE and curve NRMSE for the
-      whole log and its halves, beside the linear Kalman baseline.
+    Writes
+    ------
+    - ``estimates.csv``: :data:`ESTIMATE_COLUMNS` (the blended estimate), then
+      ``beta_std`` (its std [rad]), ``mu_observer`` (probability of the observer mode),
+      ``beta_hat_online`` (causal blend), ``beta_observer``, ``beta_observer_online`` (the
+      observer alone, refined and causal), ``beta_kf`` (the linear KF), ``health`` (of the
+      causal observer, :data:`~tire_learning_env.observer.HEALTH_NAMES` index);
+    - ``tire_curves.csv`` (learned, its two-sigma band, online, nominal, measured),
+      ``tire_curves.png``, ``tire_curve_front.png``, ``tire_curve_rear.png``, ``sideslip.png``,
+      ``weights.png``;
+    - ``metrics.json``: cleaning, calibration (what was estimated and what was assumed),
+      certificate, stiffness with its band and verdict, blend shares, runtime, and with
+      ``true_vy``/``true_beta`` the sideslip RMSE and curve NRMSE (whole log and halves).
 
-    Returns the metrics dict.
+    Returns
+    -------
+    dict
+        The metrics.
     """
-    if basis not in ("two_sided",):
-        raise ParameterError(
-            f"basis {basis!r} is not available for IMU logs: the paper's basis is one-sided (flat for negative "
-            "slip) and carries bias members that an IMU cannot tell from a sideslip offset; use 'two_sided'"
-        )
-    config = (config or ImuConfig()).replace(warm_start=bool(warm_start))
-    cleaned, report = clean_imu_log(
-        log, vehicle, max_steer_rate=config.max_steer_rate, max_yaw_accel=config.max_yaw_accel, max_abs_ay=config.max_abs_ay
-    )
-    rows = _imu_rows(cleaned.sensors)
+    config = config or ObserverConfig(sensors="imu")
+    if basis is not None:
+        config = config.replace(basis=basis)
+    if warm_start is not None:
+        config = config.replace(offline=bool(warm_start))
+    config = imu_config(config)
+    cleaned, report = clean_imu_log(log, vehicle)
+    rows = _rows(cleaned.sensors)
     t_start = time.perf_counter()
-    result = estimate_imu(rows, vehicle, config, cache=cache)
+    result = estimate_imu(rows, vehicle, config, blend=blend, cache=cache)
     wall = time.perf_counter() - t_start
     metrics = _metrics(cleaned, report, vehicle, config, result, wall)
     _write_outputs(out, cleaned, vehicle, result, metrics)
     return metrics
 
 
-def _speed_coverage(rows: dict, gains: ImuGains, max_steer: float) -> dict:
+def _speed_coverage(rows: dict, gains) -> dict:
     vx, d = rows["vx"], rows["delta"]
     lo, hi = gains.speed_range
     outside = (vx < lo) | (vx > hi)
+    max_steer = float(gains.settings.get("design", {}).get("max_steer", 0.3))
     return {
-        "vx_min_mps": float(vx.min()),
-        "vx_max_mps": float(vx.max()),
+        "vx_min_mps": float(np.nanmin(vx)),
+        "vx_max_mps": float(np.nanmax(vx)),
         "certified_range_mps": [lo, hi],
         "rows_outside_certified_speed_range": int(outside.sum()),
         "rows_beyond_max_steer": int((np.abs(d) > max_steer).sum()),
@@ -358,18 +310,31 @@ def _speed_coverage(rows: dict, gains: ImuGains, max_steer: float) -> dict:
     }
 
 
-def _stiffness_block(result: ImuResult, vehicle: VehicleParams) -> dict:
-    def block(w):
-        per_tire = result.cornering_stiffness(w)
-        return {
-            "per_tire_N_per_rad": dict(zip(AXLES, per_tire)),
-            "per_axle_N_per_rad": {a: 2.0 * v for a, v in zip(AXLES, per_tire)},
-        }
-
+def _stiffness_block(result: ImuEstimate, vehicle: VehicleParams) -> dict:
+    core = result.core
+    rep = core.stiffness_report()
+    k = core.cornering_stiffness()
+    s = core.cornering_stiffness_std()
+    ko = core.observer.cornering_stiffness(core.online_weights)
     out = {
-        "definition": "slope of the learned axle curve at zero slip; per tire = half the axle value",
-        "final": block(None),
-        "online_end_of_log": block(result.online_weights),
+        "definition": "slope at zero slip of a polynomial fitted over the linear range of the learned axle curve "
+        "(observer.offline.stiffness_readout); per tire = half the axle value; band = +/- 2 sigma from the "
+        "estimator's own covariance",
+        "verdict": core.verdict,
+        "final": {
+            "per_tire_N_per_rad": dict(zip(AXLES, k)),
+            "per_axle_N_per_rad": {a: 2.0 * v for a, v in zip(AXLES, k)},
+            "std_per_tire_N_per_rad": dict(zip(AXLES, s)),
+            "band_2sigma_per_axle_N_per_rad": {a: [2.0 * (v - 2 * e), 2.0 * (v + 2 * e)] for a, v, e in zip(AXLES, k, s)},
+            "identified": {a: rep[a]["identified"] for a in AXLES},
+        },
+        "online_end_of_log": {
+            "per_tire_N_per_rad": dict(zip(AXLES, ko)),
+            "per_axle_N_per_rad": {a: 2.0 * v for a, v in zip(AXLES, ko)},
+            "definition": "slope at zero slip of the curve at the end of the causal pass",
+        },
+        "report": rep,
+        "learned_slip_range_deg": core.learned_slip_range(),
         "nominal_per_tire_N_per_rad": {"front": vehicle.Cf, "rear": vehicle.Cr},
         "nominal_per_axle_N_per_rad": {"front": 2 * vehicle.Cf, "rear": 2 * vehicle.Cr},
     }
@@ -380,19 +345,22 @@ def _stiffness_block(result: ImuResult, vehicle: VehicleParams) -> dict:
     return out
 
 
-def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: ImuConfig, result: ImuResult, wall: float) -> dict:
-    from .scoring import (
-        MeasuredCurve,
-        measured_tire_data,
-        near_zero_stiffness,
-        reference_beta,
-        sideslip_rmse_deg,
-        split_masks,
-    )
+def _calibration(result: ImuEstimate) -> dict:
+    cal = {k: v for k, v in result.core.calibration.items() if not str(k).startswith("_")}
+    noise = dict(cal.get("noise", {}))
+    noise["imu"] = result.noise
+    cal["noise"] = noise
+    return cal
 
-    rows = _imu_rows(cleaned.sensors)
+
+def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: ObserverConfig, result: ImuEstimate,
+             wall: float) -> dict:  # fmt: skip
+    from .scoring import MeasuredCurve, measured_tire_data, near_zero_stiffness, reference_beta, sideslip_rmse_deg, split_masks
+
+    rows = _rows(cleaned.sensors)
     t = rows["t"]
-    obs_runtime = result.runtime_s["online_pass"] + result.runtime_s.get("warm_start_pass", 0.0)
+    core = result.core
+    obs_rt = core.runtime_s
     metrics: dict = {
         "log": cleaned.source,
         "log_kind": "imu",
@@ -403,33 +371,50 @@ def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: ImuCo
         "cleaning": report.to_dict(),
         "vehicle": vehicle.to_dict(),
         "config": config.to_dict(),
-        "speed_coverage": _speed_coverage(rows, result.gains, config.max_steer),
-        "lmi": result.gains.summary(),
+        "summary": core.summary(),
+        "calibration": _calibration(result),
+        "speed_coverage": _speed_coverage(rows, core.gains),
+        "lmi": core.gains.summary(),
         "cornering_stiffness": _stiffness_block(result, vehicle),
-        "diverged": {"online": result.online.diverged, "final": result.final.diverged},
+        "health": {"online": core.online.health_fraction, "online_final": core.online.final_health,
+                   "reported_final": core.trace.final_health},  # fmt: skip
         "innovation_rms": {
-            "ay_mps2": float(np.sqrt(np.nanmean(result.final.innovation[:, 0] ** 2))),
-            "yaw_rate_radps": float(np.sqrt(np.nanmean(result.final.innovation[:, 1] ** 2))),
+            "ay_mps2": float(np.sqrt(np.nanmean(core.trace.innovation[:, 2] ** 2))),
+            "yaw_rate_radps": float(np.sqrt(np.nanmean(core.trace.innovation[:, 3] ** 2))),
+        },
+        "blend": {
+            "what": "interacting-multiple-model probabilities of the observer and the linear KF from their a_y and "
+            "yaw-rate innovations (imu.blend); the reported states are the mixture",
+            "settings": result.blend_params.to_dict(),
+            "reported": result.blend.summary(),
+            "online": result.blend_online.summary(),
         },
         "runtime_s": {
-            **{k: float(v) for k, v in result.runtime_s.items()},
-            "observer_all_passes": float(obs_runtime),
+            "observer": {k: float(v) for k, v in obs_rt.items()},
+            "observer_all_passes": float(obs_rt.get("online_pass", 0.0) + obs_rt.get("offline_refinement", 0.0)),
+            "linear_kf": float(result.runtime_s["linear_kf"]),
+            "blend": float(result.runtime_s["blend"]),
             "estimate_wall_incl_baselines": float(wall),
-            "note": "gains = LMI solve or cache load + numpy re-certification; passes exclude numba compilation/loading (jit_compile_or_load)",
+            "note": "observer.gains = LMI solve or cache load + numpy re-certification",
         },
         "baseline_linear_kf": {
             "what": "linear Kalman filter of the source paper (states beta, r; measurements a_y, r; axle stiffness "
-            "2 Cf, 2 Cr of the vehicle file)",
-            "settings": result.kalman_settings,
-            "runtime_s": float(result.runtime_s["kalman"]),
+            "2 Cf, 2 Cr of the vehicle file), baselines.LinearKalmanFilter, with the measured IMU noise",
+            "settings": result.kalman_filter.settings(),
             "tire_curve": "linear with the nominal axle stiffness: scored as tire_curve_nrmse.nominal_linear_curve",
             "sideslip_rmse": "reference_scores.sideslip_rmse_deg.linear_kf_baseline",
         },
+        "estimates_csv": {
+            "beta_hat": "reported: blend of the refined observer pass and the linear KF",
+            "beta_hat_online": "blend of the causal observer pass and the linear KF",
+            "beta_observer": "refined observer pass alone", "beta_observer_online": "causal observer pass alone",
+            "beta_kf": "linear KF alone",
+        },  # fmt: skip
         "not_modelled": [
-            "longitudinal load transfer (a_x): the axle curves are learned as functions of slip only; the log's "
-            "h_cg = 1.115 m load-transfer scaling was not adopted (see docs/real_car.md)",
+            "longitudinal load transfer (a_x): the axle curves are learned as functions of slip only",
             "aerodynamic downforce, roll and camber, combined slip under braking/traction, tire relaxation",
-            "sensor biases as states: a force or sideslip offset is not identifiable from (a_y, r); F(0) = 0 is imposed",
+            "a force offset at zero slip (not identifiable from a_y, r: F(0) = 0 is imposed); constant a_y and "
+            "yaw-rate sensor offsets are learned",
         ],
         "discrepancy_workflow": (
             "run separately: tire-learning discrepancy LOG.csv --vehicle V.json --tire learned --out DIR "
@@ -443,11 +428,10 @@ def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: ImuCo
         return metrics
     masks = split_masks(t)
     rmse = {
-        "observer_online_causal": sideslip_rmse_deg(result.online.beta, beta_ref, masks),
-        "observer_warm_start_second_pass": sideslip_rmse_deg(result.final.beta, beta_ref, masks)
-        if config.warm_start
-        else None,
-        "observer_fixed_nominal_curve_no_learning": sideslip_rmse_deg(result.nominal.beta, beta_ref, masks),
+        "reported_blend": sideslip_rmse_deg(result.blend.beta, beta_ref, masks),
+        "online_blend_causal": sideslip_rmse_deg(result.blend_online.beta, beta_ref, masks),
+        "observer_online_causal": sideslip_rmse_deg(core.online.beta, beta_ref, masks),
+        "observer_refined": sideslip_rmse_deg(core.trace.beta, beta_ref, masks),
         "linear_kf_baseline": sideslip_rmse_deg(result.kalman.beta, beta_ref, masks),
     }
     curves = {name: MeasuredCurve(data, m) for name, m in masks.items()}
@@ -457,11 +441,11 @@ def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: ImuCo
         "nominal_linear_curve": {a: {k: c.nrmse(result.nominal_axle_force, a) for k, c in curves.items()} for a in AXLES},
     }
     first_end = int(np.flatnonzero(masks["first_half"])[-1])
-    curve_mid = result.curve_at(first_end)
+    curve_mid = core.online_curve_at(first_end)
     nrmse["online_curve_learned_on_first_half_vs_second_half"] = {
         a: curves["second_half"].nrmse(curve_mid, a) for a in AXLES
     }
-    best_online = rmse["observer_online_causal"]["whole"]
+    kf_whole = rmse["linear_kf_baseline"]["whole"]
     metrics["reference_scores"] = {
         "note": "reference sensor columns (true_vy/true_beta) used here only; all rows scored, no burn-in; halves "
         "split at the middle time of the log",
@@ -473,37 +457,38 @@ def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: ImuCo
         f"0.5-99.5 % slip quantiles, r_dot from a zero-phase {data.cutoff_hz:g} Hz Butterworth-filtered yaw rate",
         "measured_axle_stiffness_near_zero_N_per_rad": near_zero_stiffness(data),
         "targets": {
-            "sideslip_rmse_deg_max": 0.5,
-            "sideslip_met_online_causal": bool(best_online <= 0.5),
+            "reported_no_worse_than_linear_kf": bool(rmse["reported_blend"]["whole"] <= kf_whole),
+            "online_no_worse_than_linear_kf": bool(rmse["online_blend_causal"]["whole"] <= kf_whole),
             "curve_nrmse_max": 0.10,
             "curve_met_final": {a: bool(nrmse["final_learned_curve"][a]["whole"] <= 0.10) for a in AXLES},
-            "runtime_s_max": 10.0,
-            "runtime_met": bool(obs_runtime <= 10.0),
         },
     }
     return metrics
 
 
-def _write_outputs(out, cleaned: DrivingLog, vehicle, result: ImuResult, metrics: dict) -> None:
+def _write_outputs(out, cleaned: DrivingLog, vehicle, result: ImuEstimate, metrics: dict) -> None:
     from .. import plotting
     from .plots import plot_axle_comparison, plot_sideslip
     from .scoring import MeasuredCurve, measured_tire_data, reference_beta
 
-    fin = result.final
-    rows = _imu_rows(cleaned.sensors)
+    core = result.core
+    fin, onl, b = core.trace, core.online, result.blend
+    rows = _rows(cleaned.sensors)
     data = measured_tire_data(cleaned.sensors, cleaned.truth, vehicle)
     measured = MeasuredCurve(data) if data is not None else None
     with atomic_directory(out) as d:
         cols = {
-            "t": fin.t, "beta_hat": fin.beta, "vy_hat": fin.x[:, 0], "yaw_rate_hat": fin.x[:, 1],
-            "alpha_f_hat": fin.slip[:, 0], "alpha_r_hat": fin.slip[:, 1], "Fyf_hat": fin.force[:, 0],
-            "Fyr_hat": fin.force[:, 1], "beta_hat_online": result.online.beta, "beta_kf": result.kalman.beta,
+            "t": b.t, "beta_hat": b.beta, "vy_hat": b.vy, "yaw_rate_hat": b.yaw_rate, "alpha_f_hat": b.slip[:, 0],
+            "alpha_r_hat": b.slip[:, 1], "Fyf_hat": b.force[:, 0], "Fyr_hat": b.force[:, 1], "beta_std": b.beta_std,
+            "mu_observer": b.mu_observer, "beta_hat_online": result.blend_online.beta, "beta_observer": fin.beta,
+            "beta_observer_online": onl.beta, "beta_kf": result.kalman.beta, "health": onl.health.astype(float),
         }  # fmt: skip
         write_table(d / "estimates.csv", cols)
         grid = np.radians(np.linspace(-10.0, 10.0, 201))
         table = {"alpha": grid}
         for a, key in zip(AXLES, ("Fyf", "Fyr")):
             table[key] = result.axle_force(grid, a)
+            table[f"{key}_2sigma"] = 2.0 * result.axle_force_std(grid, a)
             table[f"{key}_online"] = result.online_axle_force(grid, a)
             table[f"{key}_nominal"] = result.nominal_axle_force(grid, a)
             if measured is not None:
@@ -516,7 +501,7 @@ def _write_outputs(out, cleaned: DrivingLog, vehicle, result: ImuResult, metrics
         else:
             excited = {a: [math.degrees(v) for v in np.percentile(fin.slip[:, i], [0.5, 99.5])] for i, a in enumerate(AXLES)}
         samples = {a: (fin.slip[:, i], fin.force[:, i]) for i, a in enumerate(AXLES)}
-        shown = {"learned (final)": result.axle_force, "online (causal, end)": result.online_axle_force,
+        shown = {"learned (refined)": result.axle_force, "online (causal, end)": result.online_axle_force,
                  "nominal linear": result.nominal_axle_force}  # fmt: skip
         if measured is not None:
 
@@ -526,9 +511,12 @@ def _write_outputs(out, cleaned: DrivingLog, vehicle, result: ImuResult, metrics
                 return np.where((a >= lo) & (a <= hi), measured(a, axle), np.nan)
 
             shown = {"measured (reference sensor)": measured_in_range, **shown}
+        kw = {}
+        if "bands" in inspect.signature(plotting.plot_tire_curves).parameters:
+            kw["bands"] = {"learned (refined)": result.axle_force_std}
         plotting.plot_tire_curves(
             shown, None, excited, samples, title=f"learned axle curves (samples: observer estimates): "
-            f"{Path(cleaned.source).name}", path=d / "tire_curves.png",
+            f"{Path(cleaned.source).name}", path=d / "tire_curves.png", **kw,
         )  # fmt: skip
         for i, a in enumerate(AXLES):
             plot_axle_comparison(
@@ -537,6 +525,7 @@ def _write_outputs(out, cleaned: DrivingLog, vehicle, result: ImuResult, metrics
                 measured, path=d / f"tire_curve_{a}.png",
             )  # fmt: skip
         beta_ref = reference_beta(cleaned.truth, rows["vx"])
-        plot_sideslip(fin.t, result.online.beta, result.kalman.beta, beta_ref, path=d / "sideslip.png")
-        plotting.plot_weights(fin.t, fin.weights, result.observer.basis.n_per_axle, title="weights (final pass)",
-                              path=d / "weights.png")  # fmt: skip
+        plot_sideslip(b.t, b.beta, result.kalman.beta, beta_ref, path=d / "sideslip.png", beta_observer=onl.beta)
+        if onl.weights.size:
+            plotting.plot_weights(onl.t, onl.weights[:, : core.observer.basis.n_weights], core.observer.basis.n_per_axle,
+                                  title="weights (causal pass)", path=d / "weights.png")  # fmt: skip

@@ -58,13 +58,17 @@ def plot_axle_comparison(
     return save_figure(fig, path)
 
 
-def plot_sideslip(t: NDArray, beta_hat: NDArray, beta_kf: NDArray, beta_ref: NDArray | None, path=None):
-    """Sideslip over time: observer (causal pass), linear Kalman baseline, reference."""
+def plot_sideslip(t: NDArray, beta_hat: NDArray, beta_kf: NDArray, beta_ref: NDArray | None, path=None,
+                  beta_observer: NDArray | None = None):  # fmt: skip
+    """Sideslip over time [deg]: the reported estimate, the linear Kalman baseline, the causal
+    observer alone (optional) and the reference sensor (optional)."""
     fig, ax = plt.subplots(figsize=(12, 4.0))
     if beta_ref is not None:
         ax.plot(t, np.asarray(beta_ref) * _DEG, "k-", lw=1.2, label="reference sensor")
     ax.plot(t, np.asarray(beta_kf) * _DEG, "b-", lw=0.7, alpha=0.7, label="linear KF (baseline)")
-    ax.plot(t, np.asarray(beta_hat) * _DEG, "r-", lw=0.8, label="neuro-adaptive observer (causal)")
+    if beta_observer is not None:
+        ax.plot(t, np.asarray(beta_observer) * _DEG, "g-", lw=0.6, alpha=0.7, label="neuro-adaptive observer (causal)")
+    ax.plot(t, np.asarray(beta_hat) * _DEG, "r-", lw=0.8, label="reported (observer / KF blend)")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("sideslip [deg]")
     ax.grid(alpha=0.3)
