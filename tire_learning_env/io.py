@@ -13,6 +13,7 @@ column, so an estimator that reads only ``sensors`` cannot see the answer.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import shutil
@@ -26,7 +27,7 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 from numpy.typing import NDArray
 
-from .params import VehicleParams
+from .params import ParameterError, VehicleParams
 
 __all__ = [
     "LogFormatError",
@@ -229,15 +230,45 @@ def write_log(path: str | Path, columns: Mapping[str, NDArray]) -> Path:
     return write_table(path, {c: columns[c] for c in names})
 
 
-def read_vehicle(path: str | Path | None) -> VehicleParams:
-    """Vehicle JSON (``m, Iz, lf, lr, Cf, Cr`` and optionally other :class:`VehicleParams` fields).
+VEHICLE_FILE_KEYS = ("m", "Iz", "lf", "lr", "Cf", "Cr")
 
-    ``None`` gives the paper's D-class sedan. Unknown keys, unreadable files and invalid
-    values raise :class:`~tire_learning_env.params.ParameterError`.
+
+def read_vehicle(path: str | Path | None) -> VehicleParams:
+    """Vehicle JSON: ``m, Iz, lf, lr, Cf, Cr`` required, other :class:`VehicleParams` fields optional.
+
+    ``None`` gives the paper's D-class sedan. A missing required key (never filled in from
+    the sedan), an unknown key, a value of the wrong type (``true``, ``"heavy"``), an
+    implausible value (:meth:`VehicleParams.check_plausible`), an unreadable file and
+    invalid JSON raise :class:`~tire_learning_env.params.ParameterError` naming the file
+    and the key.
     """
     if path is None:
         return VehicleParams()
-    return VehicleParams.from_json(path)
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParameterError(f"cannot read vehicle file {path}: {exc}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ParameterError(f"vehicle file {path} is not valid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise ParameterError(f"vehicle file {path}: expected a JSON object {{\"m\": ..., ...}}, got {type(data).__name__}")
+    allowed = [f.name for f in dataclasses.fields(VehicleParams)]
+    unknown = sorted(set(data) - set(allowed))
+    if unknown:
+        raise ParameterError(f"vehicle file {path}: unknown key(s) {unknown}; allowed keys are {sorted(allowed)}")
+    missing = [k for k in VEHICLE_FILE_KEYS if k not in data]
+    if missing:
+        raise ParameterError(
+            f"vehicle file {path}: required key(s) {missing} missing (a vehicle file needs "
+            f"{', '.join(VEHICLE_FILE_KEYS)}; nothing is filled in from the default sedan)"
+        )
+    try:
+        return VehicleParams.from_dict(data).check_plausible()
+    except ParameterError as exc:
+        raise ParameterError(f"vehicle file {path}: {exc}") from None
 
 
 def _umask_mode(mode: int = 0o666) -> int:

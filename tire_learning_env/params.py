@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import numbers
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, ClassVar, Mapping, TypeVar
@@ -78,6 +79,23 @@ class _Params:
             value = getattr(self, name)
             if not value >= 0:
                 raise ParameterError(f"{type(self).__name__}.{name} must be >= 0, got {value!r}")
+
+    def _check_types(self) -> None:
+        """Raise :class:`ParameterError` naming a field whose value has the wrong type: a
+        ``float``/``int`` field takes a real number (a bool is not a number), a ``str`` field
+        a string."""
+        for f in fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            kind = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
+            if kind in ("float", "int"):
+                if isinstance(value, bool) or not isinstance(value, numbers.Real):
+                    raise ParameterError(
+                        f"{type(self).__name__}.{f.name} must be a number, got {value!r} ({type(value).__name__})"
+                    )
+            elif kind == "str" and not isinstance(value, str):
+                raise ParameterError(
+                    f"{type(self).__name__}.{f.name} must be a string, got {value!r} ({type(value).__name__})"
+                )
 
     @classmethod
     def from_dict(cls: type[P], data: Mapping[str, Any]) -> P:
@@ -153,6 +171,55 @@ class VehicleParams(_Params):
 
     _positive: ClassVar[tuple[str, ...]] = ("m", "Iz", "lf", "lr", "vx", "Cf", "Cr", "width", "track")
     _non_negative: ClassVar[tuple[str, ...]] = ("h_cg",)
+
+    def __post_init__(self) -> None:
+        self._check_types()
+        super().__post_init__()
+
+    #: Plausible ranges (checked by :meth:`check_plausible`, i.e. for vehicle files): wide enough
+    #: for a 1/10-scale model car up to a loaded truck, narrow enough to catch wrong units and typos.
+    PLAUSIBLE: ClassVar[dict[str, tuple[float, float, str]]] = {
+        "m": (1.0, 60000.0, "kg"),
+        "lf": (0.05, 10.0, "m"),
+        "lr": (0.05, 10.0, "m"),
+        "vx": (0.5, 120.0, "m/s"),
+        "width": (0.1, 4.0, "m"),
+        "track": (0.1, 4.0, "m"),
+        "h_cg": (0.0, 4.0, "m"),
+    }
+
+    def check_plausible(self) -> "VehicleParams":
+        """Raise :class:`ParameterError` naming a value outside its plausible range.
+
+        Absolute ranges for ``m``, ``lf``, ``lr``, ``vx``, ``width``, ``track``, ``h_cg``
+        (:attr:`PLAUSIBLE`); scale-free checks for the rest: the yaw-inertia ratio
+        ``Iz / (m lf lr)`` within 0.2-5 (about 1 for a car), and the per-tire cornering
+        stiffness divided by the static load on that tire within 1-100 1/rad (about 10-30
+        for road tires). Returns ``self``.
+        """
+        name = type(self).__name__
+        for key, (lo, hi, unit) in self.PLAUSIBLE.items():
+            value = getattr(self, key)
+            if not lo <= value <= hi:
+                raise ParameterError(f"{name}.{key} = {value!r} {unit} is implausible (expected {lo:g}-{hi:g} {unit})")
+        ratio = self.Iz / (self.m * self.lf * self.lr)
+        if not 0.2 <= ratio <= 5.0:
+            raise ParameterError(
+                f"{name}.Iz = {self.Iz!r} kg m^2 is implausible for m = {self.m:g} kg, lf = {self.lf:g} m, "
+                f"lr = {self.lr:g} m: Iz / (m lf lr) = {ratio:.3g}, expected 0.2-5 (about 1 for a car; "
+                f"{0.2 * self.m * self.lf * self.lr:.4g}-{5 * self.m * self.lf * self.lr:.4g} kg m^2)"
+            )
+        front, rear = self.static_axle_loads
+        for key, load in (("Cf", front / 2), ("Cr", rear / 2)):
+            value = getattr(self, key)
+            coefficient = value / load
+            if not 1.0 <= coefficient <= 100.0:
+                raise ParameterError(
+                    f"{name}.{key} = {value!r} N/rad per tire is implausible for a static tire load of {load:.4g} N: "
+                    f"{key} / load = {coefficient:.3g} 1/rad, expected 1-100 (10-30 for road tires; "
+                    f"{load:.4g}-{100 * load:.4g} N/rad). {key} is the stiffness of ONE tire in N/rad"
+                )
+        return self
 
     @property
     def wheelbase(self) -> float:
@@ -265,6 +332,7 @@ class CameraParams(_Params):
     _non_negative: ClassVar[tuple[str, ...]] = ("latency", "e1_noise", "e2_noise", "dropout_probability")
 
     def __post_init__(self) -> None:
+        self._check_types()
         super().__post_init__()
         if self.noise not in _NOISE_KINDS:
             raise ParameterError(f"CameraParams.noise must be one of {_NOISE_KINDS}, got {self.noise!r}")
