@@ -38,7 +38,7 @@ def test_reads_a_camera_log_and_keeps_truth_apart(tmp_path):
         ("", "empty"),
         ("t,vx,delta,kappa,e1,e2\n", "no rows"),
         ("t,vx,delta,kappa,e1,e2\n0,30,0,0,0,0\n", "only 1 rows"),
-        ("t,vx,delta,kappa,e1,e2\n0,30,0,0,0\n", "values per row|malformed"),
+        ("t,vx,delta,kappa,e1,e2\n0,30,0,0,0\n", "values per row|malformed|has 5 values but the header names 6 columns"),
     ],
 )
 def test_bad_logs_raise_naming_the_problem(tmp_path, text, message):

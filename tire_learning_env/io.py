@@ -48,6 +48,8 @@ __all__ = [
     "current_run_context",
     "record_run_info",
     "KNOWN_COLUMNS",
+    "check_log_units",
+    "VEHICLE_FILE_KEYS",
 ]
 
 SENSOR_COLUMNS = ("t", "vx", "delta", "kappa", "e1", "e2", "yaw_rate", "ay", "ax")
@@ -165,8 +167,117 @@ def _validate(columns: dict[str, NDArray], source: str) -> str:
     return "camera" if has_camera else "imu"
 
 
-def read_log(path: str | Path, min_rows: int = 2) -> DrivingLog:
+_MAGIC = (
+    (b"\x1f\x8b", "gzip-compressed; decompress it first (gunzip)"),
+    (b"PK\x03\x04", "a zip archive (or an Excel .xlsx file); extract or export it as CSV"),
+    (b"BZh", "bzip2-compressed; decompress it first (bunzip2)"),
+    (b"\xfd7zXZ\x00", "xz-compressed; decompress it first (unxz)"),
+    (b"\x28\xb5\x2f\xfd", "zstd-compressed; decompress it first (unzstd)"),
+    (b"PAR1", "a Parquet file; export it as CSV"),
+    (b"\xd0\xcf\x11\xe0", "an old Excel/Office file; export it as CSV"),
+    (b"\xff\xfe", "UTF-16 text; save it as UTF-8 CSV"),
+    (b"\xfe\xff", "UTF-16 text; save it as UTF-8 CSV"),
+)
+
+
+def _decode(raw: bytes, source: str, notes: list[str]) -> str:
+    for magic, what in _MAGIC:
+        if raw.startswith(magic):
+            raise LogFormatError(f"{source}: the file is {what}, not a plain-text CSV log")
+    if b"\x00" in raw[:65536]:
+        raise LogFormatError(f"{source}: the file is binary (it contains NUL bytes), not a plain-text CSV log")
+    if raw.startswith(b"\xef\xbb\xbf"):
+        notes.append("removed a UTF-8 byte-order mark")
+        raw = raw[3:]
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise LogFormatError(
+            f"{source}: not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line}); save the log as a UTF-8 CSV"
+        ) from None
+
+
+def _to_float(values: list[str], name: str, source: str, first_line: int) -> NDArray:
+    """One column as floats; empty cells are NaN; anything else that is not a number raises."""
+    cells = np.array([v.strip() for v in values], dtype=str)
+    cells[cells == ""] = "nan"
+    try:
+        return cells.astype(float)
+    except ValueError:
+        pass
+    for i, v in enumerate(cells.tolist()):
+        try:
+            float(v)
+        except ValueError:
+            shown = v if len(v) <= 30 else v[:27] + "..."
+            hint = ""
+            if "," in v or (v.count(".") == 0 and "," in values[i]):
+                hint = " (a decimal comma? the format needs a '.' decimal point)"
+            raise LogFormatError(
+                f"{source}: column {name!r}, line {first_line + i}: {shown!r} is not a number{hint}"
+            ) from None
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _parse_csv(text: str, source: str, notes: list[str]) -> tuple[list[str], dict[str, list[str]], int]:
+    """Header names, raw cells per column and the file line of the first data row."""
+    lines = text.splitlines()
+    while lines and not lines[-1].strip():
+        lines.pop()
+    if not lines or not lines[0].strip():
+        raise LogFormatError(f"{source}: the file is empty (no header row)")
+    head = lines[0]
+    if "," not in head:
+        for sep, label in ((";", "';'"), ("\t", "a tab"), ("|", "'|'")):
+            if sep in head:
+                raise LogFormatError(
+                    f"{source}: the columns look separated by {label} (header {head[:60]!r}); the log format "
+                    "needs ',' separators and '.' decimal points"
+                )
+    import csv
+
+    rows = csv.reader(lines)
+    try:
+        header = next(rows)
+    except csv.Error as exc:
+        raise LogFormatError(f"{source}: malformed header: {exc}") from None
+    names = [h.strip().strip('"').strip("'").strip() for h in header]
+    if '"' in head or any(h.strip().startswith("'") for h in header):
+        notes.append("removed quotes around the column names")
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise LogFormatError(f"{source}: duplicate column name(s) {dup} in the header")
+    if "" in names:
+        raise LogFormatError(f"{source}: the header has an empty column name (column {names.index('') + 1})")
+    cells: dict[str, list[str]] = {n: [] for n in names}
+    width = len(names)
+    try:
+        for lineno, row in enumerate(rows, start=2):
+            if not row or (len(row) == 1 and not row[0].strip()):
+                continue
+            if len(row) != width:
+                hint = ""
+                if len(row) > width and any(c.strip().isdigit() for c in row[1::2]):
+                    hint = " (decimal commas? the format needs '.' decimal points and ',' separators)"
+                raise LogFormatError(
+                    f"{source}: line {lineno} has {len(row)} values but the header names {width} columns{hint}"
+                )
+            for n, v in zip(names, row):
+                cells[n].append(v)
+    except csv.Error as exc:
+        raise LogFormatError(f"{source}: malformed CSV: {exc}") from None
+    return names, cells, 2
+
+
+def read_log(path: str | Path, min_rows: int = 2, check_units: bool | None = None,
+             sensors: str = "auto") -> DrivingLog:
     """Read a driving log in the shared CSV format.
+
+    Accepted and noted: a UTF-8 byte-order mark, quoted column names. Refused with a short
+    message naming the problem: binary or compressed files, non-UTF-8 text, ``;``/tab
+    separators, decimal commas, rows of the wrong length, text in a numeric cell (column
+    and line named), and units that cannot be right (:func:`check_log_units`).
 
     Parameters
     ----------
@@ -174,43 +285,217 @@ def read_log(path: str | Path, min_rows: int = 2) -> DrivingLog:
         CSV file with one header row.
     min_rows : int
         Fewer rows is an error (too short to use).
+    check_units : bool or None
+        Check the units for plausibility; None takes the running command's setting
+        (``--no-unit-checks``), true outside the CLI.
+    sensors : {"auto", "camera", "imu"}
+        Which sensor set to use. ``auto``: the camera (``e1, e2, kappa``) when all three are
+        present, else the IMU (``yaw_rate, ay``); the choice and its reason are in
+        ``notes``, and a warning names missing camera columns when some are present.
 
     Returns
     -------
     DrivingLog
     """
+    if sensors not in ("auto", "camera", "imu"):
+        raise ValueError(f"sensors must be 'auto', 'camera' or 'imu', got {sensors!r}")
     path = Path(path)
     source = str(path)
     try:
-        with path.open() as fh:
-            header = fh.readline()
+        raw = path.read_bytes()
     except OSError as exc:
-        raise LogFormatError(f"cannot read log {path}: {exc}") from exc
-    if not header.strip():
-        raise LogFormatError(f"{source}: the file is empty (no header row)")
-    names = [h.strip() for h in header.strip().split(",")]
-    if len(set(names)) != len(names):
-        raise LogFormatError(f"{source}: duplicate column names in header {names}")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # empty file body
-            data = np.genfromtxt(path, delimiter=",", skip_header=1, dtype=float, ndmin=2, invalid_raise=True)
-    except ValueError as exc:
-        raise LogFormatError(f"{source}: malformed CSV body: {exc}") from exc
-    if data.size == 0:
+        raise LogFormatError(f"cannot read log {path}: {exc.strerror or exc}") from None
+    notes: list[str] = []
+    text = _decode(raw, source, notes)
+    names, cells, first_line = _parse_csv(text, source, notes)
+    if not cells[names[0]]:
         raise LogFormatError(f"{source}: the log has no rows")
-    if data.shape[1] != len(names):
-        raise LogFormatError(f"{source}: {data.shape[1]} values per row but {len(names)} column names")
-    columns = {name: data[:, i] for i, name in enumerate(names)}
     unknown = [n for n in names if n not in KNOWN_COLUMNS and not n.startswith("true_")]
     if unknown:
         warnings.warn(f"{source}: ignoring unknown column(s) {unknown}", stacklevel=2)
+    columns = {n: _to_float(cells[n], n, source, first_line) for n in names if n not in unknown}
     kind = _validate(columns, source)
+    kind = _choose_sensors(columns, kind, sensors, source, notes)
     if len(columns["t"]) < min_rows:
         raise LogFormatError(f"{source}: only {len(columns['t'])} rows; at least {min_rows} are needed")
-    sensors = {k: columns[k] for k in SENSOR_COLUMNS if k in columns}
+    if check_units is None:
+        check_units = current_run_context().check_units
+    if check_units:
+        check_log_units(columns, kind, source)
+    else:
+        notes.append("unit plausibility checks skipped (--no-unit-checks)")
+    sensor_cols = {k: columns[k] for k in SENSOR_COLUMNS if k in columns}
+    if kind == "imu":
+        for k in ("e1", "e2", "kappa"):
+            sensor_cols.pop(k, None)
     truth = {k: v for k, v in columns.items() if k.startswith("true_")}
-    return DrivingLog(sensors, truth, kind, source, [f"read {len(columns['t'])} rows, {kind} log"])
+    return DrivingLog(sensor_cols, truth, kind, source, [f"read {len(columns['t'])} rows, {kind} log"] + notes)
+
+
+def _choose_sensors(columns: dict, kind: str, sensors: str, source: str, notes: list[str]) -> str:
+    camera = ("e1", "e2", "kappa")
+    missing_camera = [c for c in camera if c not in columns]
+    if sensors == "camera":
+        if missing_camera:
+            raise LogFormatError(f"{source}: camera column(s) {missing_camera} are missing (sensors forced to camera)")
+        notes.append("camera log (e1, e2, kappa), as requested")
+        return "camera"
+    if sensors == "imu":
+        missing = [c for c in ("yaw_rate", "ay") if c not in columns]
+        if missing:
+            raise LogFormatError(f"{source}: IMU column(s) {missing} are missing (sensors forced to IMU)")
+        notes.append("IMU log (yaw_rate, ay), as requested" + (": camera columns ignored" if not missing_camera else ""))
+        return "imu"
+    if kind == "camera":
+        notes.append("camera log: e1, e2 and kappa present")
+        return kind
+    if len(missing_camera) < len(camera):
+        message = (f"{source}: camera column(s) {missing_camera} are missing, so the camera columns "
+                   f"{[c for c in camera if c in columns]} are not used: using the IMU (yaw_rate, ay) instead")
+        warnings.warn(message, stacklevel=3)
+        notes.append(message.split(": ", 1)[1])
+    else:
+        notes.append("IMU-only log: no e1, e2, kappa; using yaw_rate and ay")
+    return kind
+
+
+def _windows(t: NDArray, width: float) -> NDArray:
+    """Indices of ``t`` about ``width`` apart (window edges)."""
+    edges = np.arange(t[0], t[-1], width)
+    return np.unique(np.searchsorted(t, edges))
+
+
+def _slope(y: NDArray, x: NDArray, z: NDArray | None = None) -> tuple[float, float]:
+    """Least-squares slope of ``y`` on ``x`` (with ``z`` as a nuisance regressor) and the fit's R^2."""
+    cols = [x] if z is None else [x, z]
+    a = np.column_stack(cols)
+    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+    resid = y - a @ coef
+    ss = float(np.sum(y**2))
+    r2 = 1.0 - float(np.sum(resid**2)) / ss if ss > 0 else 0.0
+    return float(coef[0]), r2
+
+
+def _integral(t: NDArray, y: NDArray) -> NDArray:
+    out = np.zeros_like(t)
+    out[1:] = np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))
+    return out
+
+
+UNIT_CHECKS_HINT = "if you are sure the units are SI, pass --no-unit-checks"
+
+
+def check_log_units(columns: Mapping[str, NDArray], kind: str, source: str = "log") -> None:
+    """Raise :class:`LogFormatError` naming a column whose unit looks wrong and the likely unit.
+
+    Checks: the time step (ms instead of s), the speed (km/h instead of m/s: median above
+    70 m/s), the steering and the heading error (degrees: ``|delta|`` above 1 rad, ``|e2|``
+    above 0.5 rad), and the physics linking the columns, fitted over ~1 s windows where the
+    log holds enough excitation: ``e1`` changes by the integral of ``vx e2`` on camera logs
+    (a constant heading bias is allowed for), ``a_y = vx yaw_rate`` on IMU logs, and the
+    heading change against the integral of ``vx delta / L`` (degrees give a wheelbase
+    50x too long).
+    """
+    t, vx, delta = columns["t"], columns["vx"], columns["delta"]
+    dt = np.diff(t)
+    fix = f"; {UNIT_CHECKS_HINT}"
+    med_dt = float(np.median(dt))
+    if med_dt >= 0.5:
+        unit = "milliseconds" if med_dt < 500 else "microseconds or a timestamp"
+        raise LogFormatError(f"{source}: column 't' steps by {med_dt:g} (median): t looks like {unit}; it must be "
+                             f"in seconds{fix}")
+    v_med = float(np.median(vx))
+    if v_med > 70.0:
+        raise LogFormatError(f"{source}: column 'vx' has a median of {v_med:.4g}: that looks like km/h "
+                             f"({v_med / 3.6:.3g} m/s); vx must be in m/s{fix}")
+    if kind == "camera":
+        e2 = columns["e2"]
+        big = np.nanmax(np.abs(e2), initial=0.0)
+        if big > 0.5:
+            raise LogFormatError(f"{source}: |e2| reaches {big:.3g}: that looks like degrees; e2 must be in radians{fix}")
+        _check_camera_kinematics(columns, source, fix)
+    if kind == "imu":
+        _check_imu_kinematics(columns, source, fix)
+    _check_steering(columns, kind, source, fix)
+
+
+def _check_camera_kinematics(columns, source, fix) -> None:
+    t, vx, e1, e2 = columns["t"], columns["vx"], columns["e1"], columns["e2"]
+    frame = np.isfinite(e1) & np.isfinite(e2)
+    if frame.sum() < 50:
+        return
+    tf, e1f, e2f, vf = t[frame], e1[frame], e2[frame], vx[frame]
+    big_i = _integral(tf, vf * e2f)
+    dist = _integral(tf, vf)
+    idx = _windows(tf, 1.0)
+    if len(idx) < 10:
+        return
+    de1, di, dd = np.diff(e1f[idx]), np.diff(big_i[idx]), np.diff(dist[idx])
+    if float(np.sum(di**2)) < 0.1:  # too little heading excitation to tell
+        return
+    k, r2 = _slope(de1, di, dd)
+    if r2 < 0.5:
+        return
+    # (km/h would give k = 0.28, but fast manoeuvres do too (sideslip), so speed is judged by its median only)
+    if k < 0.1:
+        raise LogFormatError(
+            f"{source}: e1 changes {1 / k:.3g}x slower than vx*e2 predicts: 'e2' looks like degrees (must be rad){fix}")
+    if k > 5.0:
+        raise LogFormatError(
+            f"{source}: e1 changes {k:.3g}x faster than vx*e2 predicts: 'e1' looks like cm or mm (must be m){fix}")
+
+
+def _check_imu_kinematics(columns, source, fix) -> None:
+    vx, r, ay = columns["vx"], columns["yaw_rate"], columns["ay"]
+    pred = vx * r
+    ok = np.isfinite(pred) & np.isfinite(ay) & (np.abs(pred) > 2.0)
+    if ok.sum() < 50:
+        return
+    k, r2 = _slope(ay[ok], pred[ok])
+    if r2 < 0.5:
+        return
+    if 0.4 <= k <= 2.5:
+        return
+    if 0.2 <= k < 0.4:
+        why = "'vx' looks like km/h (must be m/s)"
+    elif 0.012 <= k <= 0.025:
+        why = "'yaw_rate' looks like deg/s (must be rad/s)"
+    elif 0.07 <= k <= 0.14:
+        why = "'ay' looks like g (must be m/s^2)"
+    else:
+        why = "check the units of vx [m/s], yaw_rate [rad/s] and ay [m/s^2]"
+    raise LogFormatError(f"{source}: ay = {k:.3g} x vx*yaw_rate (a car gives about 1): {why}{fix}")
+
+
+def _check_steering(columns, kind, source, fix) -> None:
+    t, vx, delta = columns["t"], columns["vx"], columns["delta"]
+    if kind == "imu":
+        heading = _integral(t, columns["yaw_rate"])
+    else:
+        e2 = columns["e2"]
+        frame = np.isfinite(e2)
+        if frame.sum() < 50:
+            return
+        e2i = np.interp(t, t[frame], e2[frame])
+        heading = e2i + _integral(t, vx * np.nan_to_num(columns["kappa"]))
+    steer = _integral(t, vx * delta)
+    idx = _windows(t, 2.0)
+    if len(idx) < 10:
+        return
+    dh, ds = np.diff(heading[idx]), np.diff(steer[idx])
+    if float(np.sum(dh**2)) < 0.01:  # too little turning to tell
+        return
+    inv_l, r2 = _slope(dh, ds)
+    if r2 < 0.5 or inv_l <= 0:
+        return
+    length = 1.0 / inv_l  # the wheelbase plus understeer the log implies [m]
+    if length > 100.0:
+        raise LogFormatError(f"{source}: the steering 'delta' is about {length / 3:.0f}x too large for the car's "
+                             f"turning: it looks like degrees (must be the road-wheel angle in rad){fix}")
+    if length > 30.0:
+        raise LogFormatError(f"{source}: the steering 'delta' is about {length / 3:.0f}x too large for the car's "
+                             f"turning: it looks like the steering-wheel angle (must be the road-wheel angle in rad; "
+                             f"divide by the steering ratio){fix}")
 
 
 def write_table(path: str | Path, columns: Mapping[str, NDArray]) -> Path:
