@@ -313,8 +313,17 @@ def test_existing_output_is_not_clobbered_on_failure(tmp_path, monkeypatch):
     bad = _write_csv(tmp_path / "bad.csv", "t,vx,delta,kappa,e1", ["0,30,0,0,0"])
     assert main(["discrepancy", str(bad), "--out", str(out), "--no-progress"]) == 2
     assert (out / "keep.txt").read_text() == "previous results"
-    # a failure half-way through writing the report leaves the old directory as it was
+    # a folder the package did not write is refused, never replaced
     res = analyze(_log(tmp_path, {}, rate=20.0, duration=20.0), progress=False)
+    from tire_learning_env.io import OutputPathError
+
+    with pytest.raises(OutputPathError, match="not written by"):
+        write_report(res, out)
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
+    # a failure half-way through rewriting a report folder leaves it as it was
+    mine = tmp_path / "mine"
+    write_report(res, mine)
+    before = sorted(p.name for p in mine.iterdir())
     from tire_learning_env.discrepancy import plots
 
     def boom(*args, **kwargs):
@@ -322,12 +331,12 @@ def test_existing_output_is_not_clobbered_on_failure(tmp_path, monkeypatch):
 
     monkeypatch.setattr(plots, "plot_whiteness", boom)
     with pytest.raises(RuntimeError, match="disk full"):
-        write_report(res, out)
-    assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
-    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]  # no temporary left behind
+        write_report(res, mine)
+    assert sorted(p.name for p in mine.iterdir()) == before
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith((".out", ".mine"))]  # no temporary left behind
     monkeypatch.undo()
-    write_report(res, out)
-    assert (out / "report.json").exists() and not (out / "keep.txt").exists()
+    write_report(res, mine)  # the package's own folder is replaced
+    assert (mine / "report.json").exists()
 
 
 def test_config_rejects_unknown_keys():

@@ -478,21 +478,35 @@ def _profile_window(t: NDArray, delta: NDArray, max_s: float = 120.0) -> slice:
     return slice(s, s + n)
 
 
-def _estimate_latency(obs: NeuroAdaptiveObserver, rows: dict, config: ObserverConfig) -> tuple[float, dict]:
-    """Profile the one-step prediction-error cost over candidate latencies (module docstring)."""
+def _estimate_latency(obs: NeuroAdaptiveObserver, rows: dict, config: ObserverConfig, weights: NDArray | None = None,
+                      around: float | None = None) -> tuple[float, dict]:  # fmt: skip
+    """Profile the one-step prediction-error cost over candidate latencies (module docstring).
+
+    First from the nominal curve (``weights=None``: the process noise is calibrated for it),
+    then again ``around`` the first estimate with the refined weights and their process
+    noise: a wrong curve biases the first profile (a stiffness error and a delay both
+    shift the phase of the response), the refined curve does not.
+    """
     win = _profile_window(rows["t"], rows["delta"])
     sub = {k: v[win] for k, v in rows.items()}
-    w0 = np.zeros(obs.n_weights)
-    load = 0.5 * obs.vehicle.m * 9.81
-    calibrate_force_error(obs, sub, w0, float(sub["t"][0]) + obs.settle_s, 25.0, (1e-4 * load, 3e-2 * load))
-    cands = [c for c in (0.0, 0.01, 0.02, 0.035, 0.05, 0.07, 0.1, 0.13) if c <= config.max_latency + 1e-12]
+    if weights is None:
+        w0 = np.zeros(obs.n_weights)
+        load = 0.5 * obs.vehicle.m * 9.81
+        calibrate_force_error(obs, sub, w0, float(sub["t"][0]) + obs.settle_s, 25.0, (1e-4 * load, 3e-2 * load))
+    else:
+        w0 = np.asarray(weights, dtype=float)
+    if around is None:
+        cands = [c for c in (0.0, 0.01, 0.02, 0.035, 0.05, 0.07, 0.1, 0.13) if c <= config.max_latency + 1e-12]
+    else:
+        step = max(0.01, 0.25 * around)
+        cands = sorted({min(max(around + k * step, 0.0), config.max_latency) for k in (-2, -1, 0, 1, 2, 3)})
     costs = {}
 
     def cost(d):
         d = round(float(d), 4)
         if d not in costs:
             obs.latency = d
-            obs.reset()
+            obs.reset(weights=w0)
             J, n = pem_cost(obs, sub, w0)
             costs[d] = J / max(n, 1)
         return costs[d]
@@ -614,6 +628,20 @@ def estimate(
     if config.offline:
         t0 = time.perf_counter()
         fit = refine(obs, rows, online_w, prior_cov=obs.prior_covariance())
+        if model.uses_camera and latency_given is None:  # the latency again, from the refined curve
+            first = obs.latency
+            obs.set_force_error(fit.force_error)
+            lat2, lat2_info = _estimate_latency(obs, rows, config, weights=fit.weights, around=first)
+            calibration["latency"] = dict(lat2_info, first_profile=calibration["latency"])
+            if abs(lat2 - first) > 0.002:  # refit from the refined weights, from the stage reached
+                frac = fit.force_error / (0.5 * vehicle.m * 9.81)
+                stages = tuple(f for f in (3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4) if f <= frac * 1.0001) or (frac,)
+                fit = refine(obs, rows, fit.weights, prior_cov=obs.prior_covariance(), force_errors=stages)
+            else:
+                obs.latency = first
+                obs.set_force_error(fit.force_error)
+                obs.reset(weights=fit.weights)
+                obs._state.pw[:] = fit.covariance
         offline = fit.trace
         runtime["offline_refinement"] = time.perf_counter() - t0
         calibration["offline"] = {
