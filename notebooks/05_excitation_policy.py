@@ -16,9 +16,9 @@
 #
 # The observer learns only the part of the tire curve the driving excites. In
 # `TireLearning-Excitation-v0` a policy adds a steering offset to the lane-keeping driver on
-# a straight road; its reward is the information the observer gains about the tire-curve
-# weights over a target slip range (computable on a real car, from the observer's own
-# covariance), minus penalties for the lateral-acceleration limit (4 m/s^2), the lane margin
+# a straight road; its reward is the information the observer gains about the tire curve
+# over a target slip range (its slope on fixed slip segments and its offset at zero slip,
+# computable on a real car from the observer's own covariance), minus penalties for the lateral-acceleration limit (4 m/s^2), the lane margin
 # and the steering rate. Each seed draws a truth tire the observer does not know. A safety
 # filter (on by default) passes every offset through a robust a_y prediction and a per-tick
 # IMU guard, so the limit holds whatever the policy asks for.
