@@ -133,7 +133,14 @@ def _imu_line(out: Path, metrics: dict) -> str:
 
 def _stiffness_text(summary: dict) -> str:
     if summary.get("verdict") != "identified":
-        return "stiffness NOT IDENTIFIABLE from this drive (too little excitation or too much noise; see metrics.json)"
+        widths = []
+        for a in ("front", "rear"):
+            band = summary.get(f"stiffness_{a}_2sigma_N_per_rad")
+            if band and all(np.isfinite(band)) and band[0] + band[1] > 0:
+                widths.append(f"{a} +/-{100 * (band[1] - band[0]) / (band[1] + band[0]):.0f} %")
+        detail = f" (2 sigma band {', '.join(widths)})" if widths else ""
+        return ("stiffness NOT IDENTIFIABLE from this drive: the band is too wide to name a value" + detail
+                + "; too little excitation, too much noise or model mismatch (see metrics.json)")
     out = []
     for a in ("front", "rear"):
         k = summary.get(f"stiffness_{a}_N_per_rad")

@@ -87,6 +87,9 @@ class ObserverConfig(_Params):
         Gain design (:class:`~.gains.GainDesign`).
     initial_std, random_walk, max_std, prior_length, prior_symmetry, sensor_offsets
         Weight prior and adaptation (:class:`~.neuro_adaptive.AdaptationParams`).
+    online_prior_length : float, optional
+        Prior length scale [deg] of the causal pass; default 0 with a camera, ``prior_length``
+        for IMU-only (:class:`~.neuro_adaptive.AdaptationParams` says why).
     nis_factor : float
         Health test margin (:class:`~.neuro_adaptive.HealthParams`).
     identifiable_rel_2sigma : float
@@ -113,6 +116,7 @@ class ObserverConfig(_Params):
     max_std: float = 1.0
     prior_length: float = 1.0
     prior_symmetry: float = 0.8
+    online_prior_length: float | None = None
     sensor_offsets: bool = True
     nis_factor: float = 3.0
     identifiable_rel_2sigma: float = 0.1
@@ -150,6 +154,7 @@ class ObserverConfig(_Params):
         return AdaptationParams(
             initial_std=self.initial_std, random_walk=self.random_walk, max_std=self.max_std,
             prior_length=self.prior_length, prior_symmetry=self.prior_symmetry, sensor_offsets=self.sensor_offsets,
+            online_prior_length=self.online_prior_length,
         )  # fmt: skip
 
     def gain_design(self) -> GainDesign:
@@ -246,11 +251,14 @@ def build_observer(
     noise_design = np.array([_quantise(v) for v in noise])
     gains = synthesize_gains(vehicle, model, float(f"{frame_period:.4g}"), noise_design, speed_range, box,
                              config.gain_design(), imu_period=imu_period, cache=cache)  # fmt: skip
+    adaptation = config.adaptation()
+    if adaptation.online_prior_length is None and model.uses_camera:
+        adaptation = adaptation.replace(online_prior_length=0.0)
     axle_load = 0.5 * vehicle.m * 9.81
     fe = (config.camera_force_error if model.uses_camera else config.imu_force_error) * axle_load
     obs = NeuroAdaptiveObserver(
         vehicle, basis, gains, noise, latency=float(latency), force_error=fe, force_error_period=frame_period,
-        adaptation=config.adaptation(), health=HealthParams(nis_factor=config.nis_factor),
+        adaptation=adaptation, health=HealthParams(nis_factor=config.nis_factor),
         initial_weights=initial_weights, physics_dt=physics_dt, sample_period=frame_period,
         pinned_slip=math.radians(config.linear_region_deg) if config.stiffness_known else 0.0,
     )  # fmt: skip
@@ -627,7 +635,7 @@ def estimate(
     offline = None
     if config.offline:
         t0 = time.perf_counter()
-        fit = refine(obs, rows, online_w, prior_cov=obs.prior_covariance())
+        fit = refine(obs, rows, online_w, prior_cov=obs.prior_covariance(offline=True))
         if model.uses_camera and latency_given is None:  # the latency again, from the refined curve
             first = obs.latency
             obs.set_force_error(fit.force_error)
@@ -636,7 +644,7 @@ def estimate(
             if abs(lat2 - first) > 0.002:  # refit from the refined weights, from the stage reached
                 frac = fit.force_error / (0.5 * vehicle.m * 9.81)
                 stages = tuple(f for f in (3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4) if f <= frac * 1.0001) or (frac,)
-                fit = refine(obs, rows, fit.weights, prior_cov=obs.prior_covariance(), force_errors=stages)
+                fit = refine(obs, rows, fit.weights, prior_cov=obs.prior_covariance(offline=True), force_errors=stages)
             else:
                 obs.latency = first
                 obs.set_force_error(fit.force_error)

@@ -80,6 +80,7 @@ class AdaptationParams(_Params):
     settle_time_constants: float = 3.0
     prior_length: float = 1.0
     prior_symmetry: float = 0.8
+    online_prior_length: float | None = None
     sensor_offsets: bool = True
     ay_offset_std: float = 0.2
     yaw_rate_offset_std: float = 0.005
@@ -274,10 +275,10 @@ class NeuroAdaptiveObserver:
             float(self.h_max),
         )  # fmt: skip
 
-    def prior_covariance(self) -> NDArray:
-        """``P_w(0)``: smooth-curve prior of the tire weights, independent sensor offsets."""
+    def prior_covariance(self, offline: bool = False) -> NDArray:
         a, b = self.adaptation, self.basis
-        tire = b.slope_prior(math.radians(a.prior_length), a.prior_symmetry) * (a.initial_std * b.weight_range) ** 2
+        length = a.prior_length if (offline or a.online_prior_length is None) else a.online_prior_length
+        tire = b.slope_prior(math.radians(length), a.prior_symmetry) * (a.initial_std * b.weight_range) ** 2
         if self.pinned_slip > 0:
             inner = ((np.maximum(np.abs(b.lower), np.abs(b.upper)) <= self.pinned_slip + 1e-12) & (b.lower != b.upper)).ravel()
             scale = np.where(inner, 1e-3, 1.0)

@@ -273,7 +273,7 @@ def refine(
     nw = observer.n_weights
     lo, hi = observer._weight_box()
     w0 = np.zeros(nw) if prior_mean is None else np.asarray(prior_mean, dtype=float)
-    P0 = observer.prior_covariance() if prior_cov is None else np.asarray(prior_cov, dtype=float)
+    P0 = observer.prior_covariance(offline=True) if prior_cov is None else np.asarray(prior_cov, dtype=float)
     Lam = np.linalg.inv(P0)
     Lam = 0.5 * (Lam + Lam.T)
     t = np.asarray(sensors["t"], dtype=float)
@@ -316,7 +316,7 @@ def pem_cost(observer: NeuroAdaptiveObserver, sensors: dict, w: NDArray, prior_c
              gate: float = 25.0) -> tuple[float, int]:  # fmt: skip
     """Cost after one Gauss-Newton step from ``w``: ``J - g^T A^-1 g`` (the quadratic model's
     minimum), and the number of updates; compares settings such as the latency cheaply."""
-    P0 = observer.prior_covariance() if prior_cov is None else prior_cov
+    P0 = observer.prior_covariance(offline=True) if prior_cov is None else prior_cov
     Lam = np.linalg.inv(P0)
     t = np.asarray(sensors["t"], dtype=float)
     acc, _ = _pass(observer, sensors, w, float(t[0]) + observer.settle_s, gate)
