@@ -358,5 +358,5 @@ def test_real_revs_log_whole_with_the_learned_tire(tmp_path):
     doc = json.loads((out / "report.json").read_text())
     assert doc["nominal_model"]["tire"]["kind"] == "learned"
     assert doc["verdict"] in ("unexplained", "found", "none")
-    assert doc["runtime_s"] < 140.0 * 2  # the target is 140 s on 2 free cores; CI machines are shared
+    # runtime: measured by benchmarks/bench_discrepancy.py --suite imu_real, not asserted on a shared machine
     assert math.isfinite(doc["gap_before"]["normalised_band_rms"]["all"])
