@@ -34,3 +34,15 @@ def test_wrapper_vectorised_and_scored():
     assert m["slip_rmse_deg"]["front"] < 0.01 and m["tire_curve_nrmse"]["rear"] < 0.02
     grid = np.radians(np.linspace(-1, 1, 5))
     assert np.all(np.diff(env.tire_curve(grid, "front")) > 0)
+
+
+@pytest.mark.parametrize("env_id", ["TireLearning-Excitation-v0", "TireLearning-HighwayExcitation-v0"])
+def test_estimator_wrapper_around_the_excitation_envs(env_id):
+    """They drop the per-tick logs by default (issue 17: a KeyError 'sensor_log'); the wrapper
+    asks for them and gets an estimate every step."""
+    env = EstimatorWrapper(gym.make(env_id))
+    env.reset(seed=0)
+    for _ in range(3):
+        _, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+    assert np.all(np.isfinite(info["estimate"]["slip"]))
+    assert info["estimate"]["state"].shape == (4,)

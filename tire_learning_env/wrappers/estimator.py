@@ -90,6 +90,13 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         inputs = getattr(env.unwrapped, "estimator_inputs", None)
         if inputs is None:
             raise TypeError(f"{type(env.unwrapped).__name__} does not expose estimator_inputs; not a tire-learning env")
+        # wrappers that drop the per-tick logs to save memory (the excitation task runs its own
+        # observer) are asked to pass them on: this wrapper needs them
+        inner = env
+        while isinstance(inner, gym.Wrapper):
+            if hasattr(inner, "info_logs"):
+                inner.info_logs = True
+            inner = inner.env
         self.config = config or ObserverConfig()
         self.observer = build_observer(
             inputs["vehicle"], inputs["camera"], self.config, inputs["physics_dt"], initial_weights=initial_weights
@@ -120,6 +127,9 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
+        if "sensor_log" not in info:
+            raise KeyError(f"{self.env} gives no info['sensor_log'] (the per-tick sensor rows the observer needs); "
+                           "wrap an env that passes it on")  # fmt: skip
         sensors = {k: info["sensor_log"][k] for k in SENSOR_KEYS}
         trace = self.observer.run(sensors)
         if self.keep_history:
