@@ -23,7 +23,11 @@ measured error into what the plant's structure allows and what the estimator add
   (:func:`~tire_learning_env.metrics.oracle_cornering_stiffness`), over the whole band
   (``full_band``) and after the same zero-phase low-pass on force and slip
   (``lowpass_<f>hz``: 2nd-order Butterworth). Ground truth is used here for scoring
-  only; no estimator sees it.
+  only; no estimator sees it. The oracle reads the stiffness as half the slope at zero
+  slip of its unregularised fit; the estimator reads it from a polynomial over the whole
+  linear range (:meth:`~tire_learning_env.observer.EstimationResult.cornering_stiffness`): on
+  the high-order plant, whose implied forces are not a bicycle curve, the two figures are
+  not directly comparable.
 
 All errors are ``100 (estimate / reference - 1)`` [%], ``[front, rear]``.
 
