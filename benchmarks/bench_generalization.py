@@ -1,0 +1,702 @@
+"""Generalisation benchmark (issue 15, item 5): the observer with DEFAULT settings on logs it has never seen.
+
+Randomised scenario families with fixed seeds (scenario ``i`` of family ``F`` is drawn from its own
+generator ``default_rng([seed, family index, i])``, so ``--n`` only appends scenarios):
+
+- **A ``low_order_pacejka``** (tuning family): the low-order bicycle plant with Pacejka axle tires of
+  random shape (``C`` 1.15-1.65, ``E`` -1.5..0.3, ``D = mu F_z`` with ``mu`` 0.8-1.2, ``B`` from the
+  slope) whose stiffness is 20 % or less off the nominal of the vehicle file (front and rear drawn
+  independently); vehicles: the paper's sedan, CommonRoad vehicles 1 and 2 (equivalent bicycles), a
+  light race car; roads: lane changes (length scaled with speed, about 3.7 m/s^2 peak) and curves of
+  random radius joined by clothoids; 15-35 m/s, constant or slowly varying.
+- **B ``multi_body``**: CommonRoad's multi-body model (vehicles 1 and 2, PAC2002), scored against the
+  *effective* axle stiffness / curve a bicycle model sees (``reference="effective"``); the vehicle file
+  holds the effective stiffness times a factor within +/-20 %.
+- **C ``held_out``**: never used for tuning -- a heavy SUV (in no other family), low-order Pacejka
+  truth as in A, on weaving roads (sine or chirp curvature) the other families never drive. Reported
+  separately.
+
+Every family: cameras at 10-100 Hz, gaussian or uniform noise of 0.5-2 cm and 0.05-1 deg (std for
+gaussian, half-width for uniform), latency 0-100 ms, 0-20 % dropped frames; the log rows at 1 kHz
+(the simulator's physics rate) with NaN between camera frames.
+
+Estimators, on the same sensor rows (never the truth):
+
+- the observer: ``estimate(log.sensors, nominal_vehicle, config=ObserverConfig(sensors="camera"))``
+  -- default settings, no camera spec, the nominal (wrong) stiffness in the vehicle file;
+- the joint UKF: ``run_ukf_baseline(log.sensors, nominal_vehicle, camera)`` with a camera spec holding
+  only what the log itself tells: the frame rate (median spacing of the frames) and the noise std
+  estimated by ``observer.calibration.estimate_noise_std`` (gaussian, no latency, no dropout figure).
+
+Per family and estimator: median, p90 and worst of |stiffness error| [%] (both axles pooled, one
+sample per axle), curve NRMSE over the excited slip range (0.5-99.5 % quantiles of the true slip),
+slip RMSE [deg], band coverage (truth inside the +/-2 sigma band; the UKF's band from its log-stiffness
+std), the observer's verdict counts, runtime. A failing scenario is recorded with its error. Each
+scenario also records how hard the truth was driven (``truth_summary``); a drive where the truth
+vehicle lost control (slip past the tire's peak, or more than 1.5 m off the path) is marked invalid
+and the family block gives the statistics over all scenarios and over the valid ones
+(``valid_truth_only``). Such a drive is redrawn (``attempt`` 1, 2, 3 of the same scenario index,
+seeded) and the rejected draw kept under ``rejected_draws``; only a scenario still invalid after three
+redraws stays in the statistics, flagged.
+
+``--long`` also measures one lane-change log of ``--long-minutes`` (default 30) with 100 Hz rows (a
+1 kHz simulation kept every 10th row, camera 100 Hz, no latency/dropout, paper-size uniform noise):
+the observer's wall time and the peak RSS (``resource.getrusage`` maxrss) before and after it.
+
+Output: JSON on stdout, written atomically to ``benchmarks/results/generalization.json``
+(``--quick``: ``generalization_quick.json``; ``--out`` to override). Partial results are written
+after every scenario.
+
+Run: ``python benchmarks/bench_generalization.py [--n 5] [--workers 2] [--quick] [--long]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import resource
+import sys
+import time
+import traceback
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
+
+RESULTS_DIR = Path(__file__).resolve().parent / "results"
+FAMILIES = ("low_order_pacejka", "multi_body", "held_out")
+HELD_OUT = "held_out"
+AXLES = ("front", "rear")
+
+# Plausible frozen parameter sets (not in the package): a light race car and a heavy SUV.
+RACE_CAR = dict(m=760.0, Iz=1000.0, lf=1.30, lr=1.40, Cf=48000.0, Cr=52000.0, width=1.9, track=1.6, h_cg=0.30)
+HEAVY_SUV = dict(m=2300.0, Iz=5400.0, lf=1.45, lr=1.55, Cf=85000.0, Cr=90000.0, width=1.95, track=1.7, h_cg=0.75)
+
+MAX_REDRAWS = 3
+CAMERA_RATES = (10.0, 15.0, 20.0, 25.0, 30.0, 50.0, 100.0)
+
+
+# --------------------------------------------------------------------------------------------
+# scenario sampling (pure data, JSON-able)
+# --------------------------------------------------------------------------------------------
+def _camera(rng: np.random.Generator) -> dict:
+    return {
+        "rate": float(rng.choice(CAMERA_RATES)),
+        "noise": str(rng.choice(["gaussian", "uniform"])),
+        "e1_noise": float(rng.uniform(0.005, 0.02)),
+        "e2_noise": float(math.radians(rng.uniform(0.05, 1.0))),
+        "latency": float(round(rng.uniform(0.0, 0.1), 4)),
+        "dropout_probability": float(round(rng.uniform(0.0, 0.2), 3)),
+    }
+
+
+def _speed(rng: np.random.Generator) -> dict:
+    vx = float(rng.uniform(15.0, 35.0))
+    if rng.random() < 1.0 / 3.0:
+        amp = float(min(rng.uniform(1.5, 4.0), vx - 15.0 + 1.5, 35.0 - vx + 1.5))
+        return {"vx": vx, "profile": "varying", "amplitude": amp, "period_s": float(rng.uniform(20.0, 40.0))}
+    return {"vx": vx, "profile": "constant"}
+
+
+def _lane_change_road(rng: np.random.Generator) -> dict:
+    return {"kind": "lane_changes", "change_time_s": float(rng.uniform(2.3, 3.0)), "gap_s": float(rng.uniform(1.5, 3.0))}
+
+
+def _curves_road(rng: np.random.Generator) -> dict:
+    # alternating curves at 1.5-4 m/s^2 (radius set from the speed when built), straight bits between
+    segs = []
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    for _ in range(8):
+        segs.append({"time_s": float(rng.uniform(2.0, 5.0)), "ay": float(sign * rng.uniform(1.5, 4.0))})
+        if rng.random() < 0.5:
+            segs.append({"time_s": float(rng.uniform(1.0, 3.0)), "ay": 0.0})
+        sign = -sign
+    return {"kind": "curves", "segments": segs, "transition_s": float(rng.uniform(0.8, 1.5))}
+
+
+def _weaving_road(rng: np.random.Generator) -> dict:
+    if rng.random() < 0.5:
+        return {"kind": "sine", "ay": float(rng.uniform(1.5, 3.5)), "period_s": float(rng.uniform(5.0, 12.0))}
+    return {"kind": "chirp", "ay": float(rng.uniform(1.5, 3.0)), "period_start_s": float(rng.uniform(10.0, 16.0)),
+            "period_end_s": float(rng.uniform(3.0, 6.0))}  # fmt: skip
+
+
+def _pacejka_truth(rng: np.random.Generator) -> dict:
+    return {
+        "stiffness_factor": [float(rng.uniform(0.8, 1.2)), float(rng.uniform(0.8, 1.2))],  # truth / nominal
+        "C": [float(rng.uniform(1.15, 1.65)) for _ in AXLES],
+        "E": [float(rng.uniform(-1.5, 0.3)) for _ in AXLES],
+        "mu": [float(rng.uniform(0.8, 1.2)) for _ in AXLES],
+    }
+
+
+def sample_scenario(family: str, i: int, seed: int, quick: bool, attempt: int = 0) -> dict:
+    """Scenario ``i`` of ``family``; ``attempt > 0`` redraws it (used when the truth vehicle lost control)."""
+    key = [seed, FAMILIES.index(family), i] + ([attempt] if attempt else [])
+    rng = np.random.default_rng(key)
+    sc: dict = {"family": family, "index": i, "base_seed": seed, "quick": quick, "attempt": attempt,
+                "sim_seed": int(rng.integers(0, 2**31 - 1))}  # fmt: skip
+    if family == "low_order_pacejka":
+        sc["vehicle"] = str(rng.choice(["sedan", "commonroad_1", "commonroad_2", "race_car"]))
+        sc["truth"] = {"plant": "low_order_pacejka", **_pacejka_truth(rng)}
+        sc["road"] = _lane_change_road(rng) if rng.random() < 0.5 else _curves_road(rng)
+        sc["duration_s"] = float(rng.uniform(30.0, 45.0))
+    elif family == "multi_body":
+        sc["vehicle"] = str(rng.choice(["commonroad_1", "commonroad_2"]))
+        sc["truth"] = {"plant": "multi_body", "nominal_factor": [float(rng.uniform(0.8, 1.2)) for _ in AXLES]}
+        sc["road"] = _lane_change_road(rng) if rng.random() < 0.5 else _curves_road(rng)
+        sc["duration_s"] = float(rng.uniform(30.0, 45.0))
+    elif family == "held_out":
+        sc["vehicle"] = "heavy_suv"
+        sc["truth"] = {"plant": "low_order_pacejka", **_pacejka_truth(rng)}
+        sc["road"] = _weaving_road(rng)
+        sc["duration_s"] = float(rng.uniform(30.0, 45.0))
+    else:
+        raise ValueError(family)
+    sc["speed"] = _speed(rng)
+    sc["camera"] = _camera(rng)
+    if quick:
+        sc["duration_s"] = 12.0
+        sc["camera"]["rate"] = min(sc["camera"]["rate"], 25.0)
+    return sc
+
+
+# --------------------------------------------------------------------------------------------
+# building and running one scenario
+# --------------------------------------------------------------------------------------------
+def _vehicle(name: str, vx: float):
+    from tire_learning_env.params import VehicleParams
+
+    if name == "sedan":
+        return VehicleParams(vx=vx)
+    if name == "race_car":
+        return VehicleParams(vx=vx, **RACE_CAR)
+    if name == "heavy_suv":
+        return VehicleParams(vx=vx, **HEAVY_SUV)
+    if name.startswith("commonroad_"):
+        from tire_learning_env.high_order import MultiBodyParams, equivalent_bicycle
+
+        return equivalent_bicycle(MultiBodyParams.from_commonroad(int(name.split("_")[1])), vx)
+    raise ValueError(name)
+
+
+def _road(spec: dict, vx: float):
+    from tire_learning_env.roads import ChirpRoad, LaneChangeRoad, PiecewiseCurvatureRoad, SineRoad
+
+    kind = spec["kind"]
+    if kind == "lane_changes":
+        length = spec["change_time_s"] * vx
+        spacing = length + spec["gap_s"] * vx
+        return LaneChangeRoad.repeated(first=2.0 * vx, spacing=spacing, count=200, change_length=length)
+    if kind == "curves":
+        segs = [(1.5 * vx, math.inf)]
+        for s in spec["segments"]:
+            radius = math.inf if s["ay"] == 0 else vx**2 / s["ay"]
+            segs.append((s["time_s"] * vx, radius))
+        segs = segs * 20  # repeat: long enough for any log
+        # clothoids no longer than 0.9 x the shortest segment (knots must stay strictly increasing)
+        transition = min(spec["transition_s"] * vx, 0.9 * min(length for length, _ in segs))
+        return PiecewiseCurvatureRoad.from_segments(segs, transition_length=transition)
+    if kind == "sine":
+        return SineRoad(amplitude=spec["ay"] / vx**2, wavelength=spec["period_s"] * vx, start=1.5 * vx)
+    if kind == "chirp":
+        return ChirpRoad(amplitude=spec["ay"] / vx**2, wavelength_start=spec["period_start_s"] * vx,
+                         wavelength_end=spec["period_end_s"] * vx, length=60.0 * vx, start=1.5 * vx)  # fmt: skip
+    raise ValueError(kind)
+
+
+def _speed_profile(spec: dict):
+    if spec["profile"] == "constant":
+        return None
+    v0, amp, w = spec["vx"], spec["amplitude"], 2.0 * math.pi / spec["period_s"]
+
+    def profile(t: float) -> tuple[float, float]:
+        return v0 + amp * math.sin(w * t), amp * w * math.cos(w * t)
+
+    return profile
+
+
+def build(sc: dict):
+    """``(log, plant, truth_vehicle, nominal_vehicle, true_curve, true_stiffness)`` of a scenario."""
+    from tire_learning_env.dynamics import BicyclePlant
+    from tire_learning_env.params import CameraParams
+    from tire_learning_env.simulation import simulate
+    from tire_learning_env.tires import PacejkaTire
+
+    vx = sc["speed"]["vx"]
+    base = _vehicle(sc["vehicle"], vx)
+    road = _road(sc["road"], vx)
+    camera = CameraParams(**sc["camera"])
+    tr = sc["truth"]
+    if tr["plant"] == "low_order_pacejka":
+        nominal = base  # the vehicle file
+        k_true = [nominal.Cf * tr["stiffness_factor"][0], nominal.Cr * tr["stiffness_factor"][1]]
+        truth_vehicle = nominal.replace(Cf=k_true[0], Cr=k_true[1])
+        loads = truth_vehicle.static_axle_loads
+        tires = []
+        for j in range(2):
+            D = tr["mu"][j] * loads[j]
+            C = tr["C"][j]
+            tires.append(PacejkaTire(B=2.0 * k_true[j] / (C * D), C=C, D=D, E=tr["E"][j]))
+        plant = BicyclePlant(truth_vehicle, *tires)
+        true_curve = plant.true_axle_curve
+        true_stiffness = plant.true_cornering_stiffness()
+    else:
+        from tire_learning_env.high_order import MultiBodyParams, MultiBodyPlant
+
+        plant = MultiBodyPlant(road, params=MultiBodyParams.from_commonroad(int(sc["vehicle"].split("_")[1])), vx=vx)
+        truth_vehicle = plant.vehicle
+        true_stiffness = plant.true_cornering_stiffness(reference="effective")
+        nominal = truth_vehicle.replace(Cf=true_stiffness[0] * tr["nominal_factor"][0],
+                                        Cr=true_stiffness[1] * tr["nominal_factor"][1])  # fmt: skip
+
+        def true_curve(a, axle):
+            return plant.true_axle_curve(a, axle, reference="effective")
+
+    log = simulate(road, sc["duration_s"], vehicle=truth_vehicle, camera=camera, seed=sc["sim_seed"], plant=plant,
+                   speed_profile=_speed_profile(sc["speed"]))  # fmt: skip
+    return log, plant, truth_vehicle, nominal, true_curve, tuple(float(x) for x in true_stiffness)
+
+
+def truth_summary(log, plant, sc: dict) -> dict:
+    """How hard the truth was driven; ``valid`` is False when the vehicle lost control (slip past the
+    tire's force peak or more than 1.5 m off the path), a drive no estimator can be scored on."""
+    slip = np.abs(np.asarray(log.truth["true_slip"], dtype=float))
+    e1 = np.abs(np.asarray(log.truth["true_state"], dtype=float)[:, 0])
+    out = {"max_abs_slip_deg": [float(np.degrees(np.nanmax(slip[:, j]))) for j in range(2)],
+           "max_abs_e1_m": float(np.nanmax(e1)), "finite": bool(np.all(np.isfinite(slip)) and np.all(np.isfinite(e1)))}  # fmt: skip
+    peak = None
+    if hasattr(plant, "front_tire") and hasattr(plant.front_tire, "peak_slip"):
+        peak = [float(np.degrees(plant.front_tire.peak_slip)), float(np.degrees(plant.rear_tire.peak_slip))]
+        out["tire_peak_slip_deg"] = peak
+    beyond = peak is not None and any(out["max_abs_slip_deg"][j] > peak[j] for j in range(2))
+    out["valid"] = bool(out["finite"] and out["max_abs_e1_m"] <= 1.5 and not beyond)
+    return out
+
+
+def _covered(k: float, std: float, truth: float) -> bool:
+    return bool(k - 2.0 * std <= truth <= k + 2.0 * std)
+
+
+def ukf_camera_from_log(sensors: dict):
+    """The camera spec the UKF gets: what the log tells, nothing true (frame rate, estimated noise std)."""
+    from tire_learning_env.observer.calibration import estimate_noise_std
+    from tire_learning_env.params import CameraParams
+
+    t = np.asarray(sensors["t"], dtype=float)
+    ok = np.isfinite(np.asarray(sensors["e1"], dtype=float))
+    rate = 1.0 / float(np.median(np.diff(t[ok])))
+    n1 = estimate_noise_std(t, sensors["e1"])
+    n2 = estimate_noise_std(t, sensors["e2"])
+    s1 = n1.std if math.isfinite(n1.std) and n1.std > 0 else 0.01
+    s2 = n2.std if math.isfinite(n2.std) and n2.std > 0 else math.radians(0.5)
+    cam = CameraParams(rate=rate, noise="gaussian", e1_noise=float(s1), e2_noise=float(s2))
+    return cam, {"rate_hz": rate, "e1_std_m": float(s1), "e2_std_rad": float(s2), "source": "estimated from the log"}
+
+
+def run_scenario(sc: dict) -> dict:
+    """Simulate, run both estimators, score. Never raises: errors are recorded."""
+    from tire_learning_env.metrics import compute_metrics
+
+    out: dict = {"scenario": sc}
+    t0 = time.perf_counter()
+    rejected = []
+    while True:
+        try:
+            log, plant, truth_vehicle, nominal, true_curve, k_true = build(sc)
+        except Exception as exc:  # noqa: BLE001
+            out["error"] = {"stage": "simulate", "message": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()[-1500:]}
+            return out
+        ts = truth_summary(log, plant, sc)
+        if ts["valid"] or sc.get("attempt", 0) >= MAX_REDRAWS or "base_seed" not in sc:
+            break
+        # the closed loop (driver on the delayed, noisy camera) lost control: no estimator can be scored
+        # on that drive; redraw the scenario deterministically and keep a record of the rejected one
+        rejected.append({"scenario": sc, "truth_summary": ts})
+        sc = sample_scenario(sc["family"], sc["index"], sc["base_seed"], sc["quick"], sc.get("attempt", 0) + 1)
+        out["scenario"] = sc
+    out["rejected_draws"] = rejected
+    out["simulate_s"] = time.perf_counter() - t0
+    out["truth_summary"] = ts
+    out["true_stiffness_N_per_rad"] = list(k_true)
+    out["nominal_stiffness_N_per_rad"] = [nominal.Cf, nominal.Cr]
+    nominal_k = (nominal.Cf, nominal.Cr)
+    out["nominal_error_pct"] = [100.0 * (nominal_k[j] / k_true[j] - 1.0) for j in range(2)]
+
+    # --- observer, defaults
+    try:
+        from tire_learning_env.observer import ObserverConfig, estimate
+
+        t1 = time.perf_counter()
+        res = estimate(log.sensors, nominal, config=ObserverConfig(sensors="camera"))
+        wall = time.perf_counter() - t1
+        tr = res.trace
+        m = compute_metrics(t=tr.t, xi_hat=tr.xi, slip_hat=tr.slip, force_nonlinear_hat=tr.force_nonlinear, truth=log.truth,
+                            curve=res.axle_force, true_curve=true_curve, stiffness_hat=res.cornering_stiffness(),
+                            stiffness_true=k_true, nominal_stiffness=nominal_k)  # fmt: skip
+        k, s = res.cornering_stiffness(), res.cornering_stiffness_std()
+        rep = res.stiffness_report()
+        cal = res.calibration
+        out["observer"] = {
+            "stiffness_error_pct": [m["cornering_stiffness"][a]["error_pct"] for a in AXLES],
+            "stiffness_N_per_rad": list(k),
+            "std_N_per_rad": list(s),
+            "covered_2sigma": [_covered(k[j], s[j], k_true[j]) for j in range(2)],
+            "identified": [bool(rep[a]["identified"]) for a in AXLES],
+            "verdict": res.verdict,
+            "curve_nrmse": [m["tire_curve_nrmse"][a] for a in AXLES],
+            "slip_rmse_deg": [m["slip_rmse_deg"][a] for a in AXLES],
+            "runtime_s": float(res.runtime_s.get("total", wall)),
+            "runtime_breakdown_s": {kk: float(v) for kk, v in res.runtime_s.items()},
+            "estimated": {
+                "noise_std": cal.get("noise", {}).get("std_used"),
+                "latency_s": (cal.get("latency") or {}).get("latency_s") if isinstance(cal.get("latency"), dict) else cal.get("latency"),
+                "frame_period_s": cal.get("frame_period_s"),
+            },
+        }
+    except Exception as exc:  # noqa: BLE001
+        out["observer"] = {"error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()[-1500:]}
+
+    # --- joint UKF, same information
+    try:
+        from tire_learning_env.baselines.ukf import run_ukf_baseline
+
+        cam, given = ukf_camera_from_log(log.sensors)
+        t1 = time.perf_counter()
+        u = run_ukf_baseline(log.sensors, nominal, cam)
+        wall = time.perf_counter() - t1
+        force_nl = u.force - u.slip * 2.0 * np.asarray(nominal_k)
+        m = compute_metrics(t=log.sensors["t"], xi_hat=u.xi, slip_hat=u.slip, force_nonlinear_hat=force_nl, truth=log.truth,
+                            curve=u.axle_force, true_curve=true_curve, stiffness_hat=u.cornering_stiffness(),
+                            stiffness_true=k_true, nominal_stiffness=nominal_k)  # fmt: skip
+        k = u.cornering_stiffness()
+        lstd = [float(u.std[-1, 4]), float(u.std[-1, 5])]  # std of ln C
+        band = [[k[j] * math.exp(-2 * lstd[j]), k[j] * math.exp(2 * lstd[j])] for j in range(2)]
+        out["ukf"] = {
+            "stiffness_error_pct": [m["cornering_stiffness"][a]["error_pct"] for a in AXLES],
+            "stiffness_N_per_rad": list(k),
+            "log_stiffness_std": lstd,
+            "covered_2sigma": [bool(band[j][0] <= k_true[j] <= band[j][1]) for j in range(2)],
+            "curve_nrmse": [m["tire_curve_nrmse"][a] for a in AXLES],
+            "slip_rmse_deg": [m["slip_rmse_deg"][a] for a in AXLES],
+            "runtime_s": wall,
+            "camera_given": given,
+        }
+    except Exception as exc:  # noqa: BLE001
+        out["ukf"] = {"error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()[-1500:]}
+    out["wall_s"] = time.perf_counter() - t0
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# aggregation
+# --------------------------------------------------------------------------------------------
+def _stats(values: list[float]) -> dict | None:
+    v = np.asarray([x for x in values if x is not None and math.isfinite(x)], dtype=float)
+    if len(v) == 0:
+        return None
+    return {"median": float(np.median(v)), "p90": float(np.percentile(v, 90)), "worst": float(np.max(v)), "n": int(len(v))}
+
+
+def summarise(records: list[dict], est: str) -> dict:
+    ok = [r[est] for r in records if est in r and "error" not in r[est]]
+    failed = [r for r in records if "error" in r or est not in r or "error" in r.get(est, {})]
+    out = {
+        "scenarios": len(records),
+        "succeeded": len(ok),
+        "failed": len(failed),
+        "abs_stiffness_error_pct": _stats([abs(e) for r in ok for e in r["stiffness_error_pct"]]),
+        "curve_nrmse_pct": _stats([100.0 * e for r in ok for e in r["curve_nrmse"]]),
+        "slip_rmse_deg": _stats([e for r in ok for e in r["slip_rmse_deg"]]),
+        "runtime_s": _stats([r["runtime_s"] for r in ok]),
+    }
+    cov = [c for r in ok for c in r["covered_2sigma"]]
+    out["band_coverage"] = {"fraction": float(np.mean(cov)) if cov else None, "n": len(cov)}
+    if est == "observer":
+        verdicts: dict = {}
+        for r in ok:
+            verdicts[r["verdict"]] = verdicts.get(r["verdict"], 0) + 1
+        out["verdict_counts"] = verdicts
+        # coverage among the identified axles only (what a user would be shown as a number)
+        cov_id = [c for r in ok for c, i in zip(r["covered_2sigma"], r["identified"]) if i]
+        out["band_coverage_identified_axles"] = {"fraction": float(np.mean(cov_id)) if cov_id else None, "n": len(cov_id)}
+        out["abs_stiffness_error_pct_identified_axles"] = _stats(
+            [abs(e) for r in ok for e, i in zip(r["stiffness_error_pct"], r["identified"]) if i]
+        )
+        out["curve_nrmse_pct_identified_scenarios"] = _stats(
+            [100.0 * e for r in ok if r["verdict"] == "identified" for e in r["curve_nrmse"]]
+        )
+    return out
+
+
+TARGETS = {
+    "low_order_pacejka": {"abs_stiffness_error_pct": {"median": 0.5, "p90": 2.0, "worst": 5.0}, "curve_nrmse_pct": {"median": 1.5},
+                          "better_than_ukf_median": ["abs_stiffness_error_pct", "curve_nrmse_pct"]},
+    "held_out": {"note": "low-order Pacejka truth: the low-order targets apply",
+                 "abs_stiffness_error_pct": {"median": 0.5, "p90": 2.0, "worst": 5.0}, "curve_nrmse_pct": {"median": 1.5}},
+    "multi_body": {"abs_stiffness_error_pct": {"median": 2.0, "p90": 5.0}},
+    "all": {"band_coverage": [0.90, 0.98]},
+}  # fmt: skip
+
+
+def check_targets(families: dict) -> dict:
+    out = {}
+    for fam, tgt in TARGETS.items():
+        if fam == "all":
+            continue
+        if fam not in families:
+            continue
+        obs = families[fam]["observer"]
+        ukf = families[fam]["ukf"]
+        res = {}
+        for key in ("abs_stiffness_error_pct", "curve_nrmse_pct"):
+            if key not in tgt or obs.get(key) is None:
+                continue
+            for q, lim in tgt[key].items():
+                val = obs[key][q]
+                res[f"{key}.{q} <= {lim}"] = {"measured": val, "met": bool(val <= lim)}
+        for key in tgt.get("better_than_ukf_median", []):
+            if obs.get(key) and ukf.get(key):
+                res[f"{key}.median < ukf"] = {"measured": obs[key]["median"], "ukf": ukf[key]["median"],
+                                              "met": bool(obs[key]["median"] < ukf[key]["median"])}  # fmt: skip
+        cov = obs["band_coverage"]["fraction"]
+        if cov is not None:
+            res["band_coverage in [0.90, 0.98]"] = {"measured": cov, "met": bool(0.90 <= cov <= 0.98)}
+        out[fam] = res
+    return out
+
+
+def _valid(r: dict) -> bool:
+    return bool(r.get("truth_summary", {}).get("valid", True))
+
+
+def aggregate(records_by_family: dict, meta: dict) -> dict:
+    fams = {}
+    for fam, recs in records_by_family.items():
+        recs = sorted(recs, key=lambda r: r["scenario"]["index"])
+        valid = [r for r in recs if _valid(r)]
+        fams[fam] = {"held_out": fam == HELD_OUT, "observer": summarise(recs, "observer"), "ukf": summarise(recs, "ukf"),
+                     "truth_invalid_scenarios": [r["scenario"]["index"] for r in recs if not _valid(r)],
+                     "valid_truth_only": {"observer": summarise(valid, "observer"), "ukf": summarise(valid, "ukf")},
+                     "scenarios": recs}  # fmt: skip
+    all_cov = [c for recs in records_by_family.values() for r in recs for c in r.get("observer", {}).get("covered_2sigma", [])]
+    return {
+        "benchmark": "generalization",
+        **meta,
+        "families": fams,
+        "band_coverage_all_families": {"fraction": float(np.mean(all_cov)) if all_cov else None, "n": len(all_cov)},
+        "targets": TARGETS,
+        "target_check": check_targets(fams),
+    }
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        x = float(x)
+        return x if math.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    return x
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def write_atomic(path: Path, data: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "w") as f:
+        json.dump(data, f, indent=2)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def markdown_table(result: dict) -> str:
+    """The README table of a result (median / p90 / worst per family and estimator)."""
+
+    def f(block, key, scale=1.0, digits=2):
+        st = block.get(key)
+        if not st:
+            return "n/a"
+        return " / ".join(f"{st[q] * scale:.{digits}f}" for q in ("median", "p90", "worst"))
+
+    lines = [
+        "| family | estimator | valid / scenarios | abs stiffness error % (median / p90 / worst) | curve NRMSE % | slip RMSE deg | "
+        "band coverage | verdicts | runtime s |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for fam, block in result["families"].items():
+        valid = block["valid_truth_only"]
+        nval = block["observer"]["scenarios"] - len(block["truth_invalid_scenarios"])
+        for est in ("observer", "ukf"):
+            v = valid[est]
+            cov = v["band_coverage"]["fraction"]
+            cov_txt = "n/a" if cov is None else f"{100 * cov:.0f} % of {v['band_coverage']['n']}"
+            verd = ", ".join(f"{k} {n}" for k, n in (v.get("verdict_counts") or {}).items()) or "-"
+            name = fam + (" (held out)" if block["held_out"] else "")
+            lines.append(
+                f"| {name} | {est} | {nval} / {block['observer']['scenarios']} (failed {v['failed']}) | "
+                f"{f(v, 'abs_stiffness_error_pct')} | {f(v, 'curve_nrmse_pct')} | {f(v, 'slip_rmse_deg', digits=3)} | "
+                f"{cov_txt} | {verd} | "
+                f"{f(block[est], 'runtime_s', digits=1)} |"
+            )
+    s = result.get("settings", {})
+    lines += ["", f"n = {s.get('n_per_family')} per family, seed {s.get('seed')}, quick = {s.get('quick')}; statistics over "
+              "scenarios whose truth stayed under control (see `truth_invalid_scenarios`), both axles pooled; "
+              "runtime over all scenarios."]  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------------------------
+# long log: runtime and peak memory
+# --------------------------------------------------------------------------------------------
+def _simulate_long_to(path: str, minutes: float) -> None:
+    from tire_learning_env.params import CameraParams, VehicleParams
+    from tire_learning_env.simulation import simulate
+
+    v = VehicleParams()
+    log = simulate("lane_changes", 60.0 * minutes, vehicle=v, camera=CameraParams.paper_noise(rate=100.0), seed=7)
+    cols = {k: np.asarray(log.sensors[k])[::10] for k in log.sensors}  # 100 Hz rows
+    np.savez(path, **cols)
+
+
+def run_long(minutes: float) -> dict:
+    import multiprocessing as mp
+    import tempfile
+
+    from tire_learning_env.observer import ObserverConfig, estimate
+    from tire_learning_env.params import VehicleParams
+
+    with tempfile.TemporaryDirectory() as d:
+        path = os.path.join(d, "long.npz")
+        p = mp.get_context("spawn").Process(target=_simulate_long_to, args=(path, minutes))  # keeps the sim out of our RSS
+        p.start()
+        p.join()
+        if p.exitcode != 0:
+            return {"error": f"simulation process exited with {p.exitcode}"}
+        with np.load(path) as z:
+            sensors = {k: z[k] for k in z.files}
+    v = VehicleParams()
+    nominal = v.replace(Cf=1.1 * v.Cf, Cr=0.9 * v.Cr)
+    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    out = {"log_minutes": minutes, "rows": int(len(sensors["t"])), "row_rate_hz": 100.0, "camera": "100 Hz, paper noise (uniform 1 cm, 1 deg)",
+           "peak_rss_before_estimate_MB": rss_before}  # fmt: skip
+    t0 = time.perf_counter()
+    try:
+        res = estimate(sensors, nominal, config=ObserverConfig(sensors="camera"))
+        out["observer_wall_s"] = time.perf_counter() - t0
+        out["observer_runtime_s"] = {k: float(x) for k, x in res.runtime_s.items()}
+        k = res.cornering_stiffness()
+        out["stiffness_error_pct"] = [100.0 * (k[0] / v.Cf - 1.0), 100.0 * (k[1] / v.Cr - 1.0)]
+        out["stiffness_error_note"] = "against the tire-model slope (2 Cf, 2 Cr of the sedan's Pacejka tires)"
+        out["verdict"] = res.verdict
+    except Exception as exc:  # noqa: BLE001
+        out["error"] = f"{type(exc).__name__}: {exc}"
+        out["observer_wall_s"] = time.perf_counter() - t0
+    out["peak_rss_MB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    out["targets"] = {"wall_s": 10.0, "peak_rss_MB": 500.0}
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--n", type=int, default=None, help="scenarios per family (default 5; --quick: 2)")
+    ap.add_argument("--quick", action="store_true", help="short logs (12 s, camera <= 25 Hz), 2 per family")
+    ap.add_argument("--seed", type=int, default=15)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--families", default=",".join(FAMILIES))
+    ap.add_argument("--long", action="store_true", help="also time one long 100 Hz lane-change log")
+    ap.add_argument("--long-minutes", type=float, default=30.0)
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--reaggregate", default=None, help="recompute the summaries of a written result file in place")
+    args = ap.parse_args(argv)
+    if args.reaggregate:
+        old = json.loads(Path(args.reaggregate).read_text())
+        for block in old["families"].values():  # records of a run before truth_summary existed: re-simulate (seeded)
+            for rec in block["scenarios"]:
+                if "truth_summary" not in rec and "error" not in rec:
+                    log, plant, *_ = build(rec["scenario"])
+                    rec["truth_summary"] = truth_summary(log, plant, rec["scenario"])
+        meta = {k: v for k, v in old.items() if k not in ("benchmark", "families", "band_coverage_all_families", "targets", "target_check")}
+        result = _jsonable(aggregate({f: b["scenarios"] for f, b in old["families"].items()}, meta))
+        write_atomic(Path(args.reaggregate), result)
+        write_text_atomic(Path(args.reaggregate).with_suffix(".md"), markdown_table(result))
+        print(json.dumps(result, indent=2))
+        return result
+    n = args.n if args.n is not None else (2 if args.quick else 5)
+    out_path = Path(args.out) if args.out else RESULTS_DIR / ("generalization_quick.json" if args.quick else "generalization.json")
+    families = [f.strip() for f in args.families.split(",") if f.strip()]
+    scenarios = [sample_scenario(f, i, args.seed, args.quick) for f in families for i in range(n)]
+    meta = {
+        "settings": {"n_per_family": n, "quick": args.quick, "seed": args.seed, "workers": args.workers, "families": families},
+        "observer_call": 'estimate(log.sensors, nominal_vehicle, config=ObserverConfig(sensors="camera")) -- defaults, no camera spec',
+        "ukf_call": "run_ukf_baseline(log.sensors, nominal_vehicle, CameraParams(rate=<median frame spacing>, noise='gaussian', "
+                    "e1_noise/e2_noise=<estimate_noise_std on the log>)) -- no oracle noise, latency or dropout",
+        "stats_note": "stiffness error, curve NRMSE and slip RMSE pool both axles (one sample per axle); band coverage "
+                      "= fraction of axles whose truth lies inside estimate +/- 2 std",
+        "machine": {"python": sys.version.split()[0], "platform": platform.platform(), "cpu_count": os.cpu_count()},
+    }  # fmt: skip
+    t_start = time.perf_counter()
+    by_family: dict = {f: [] for f in families}
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover
+        tqdm = None
+    bar = tqdm(total=len(scenarios), file=sys.stderr, disable=args.no_progress) if tqdm else None
+
+    def done(rec: dict) -> None:
+        by_family[rec["scenario"]["family"]].append(rec)
+        if bar:
+            bar.update(1)
+            obs = rec.get("observer", {})
+            bar.set_postfix_str(f"{rec['scenario']['family']}#{rec['scenario']['index']} err={obs.get('stiffness_error_pct')}")
+        partial = aggregate(by_family, meta | {"complete": False, "elapsed_s": time.perf_counter() - t_start})
+        write_atomic(out_path, _jsonable(partial))
+
+    if args.workers > 1:
+        with ProcessPoolExecutor(max_workers=args.workers) as ex:
+            futs = {ex.submit(run_scenario, sc): sc for sc in scenarios}
+            for fut in as_completed(futs):
+                try:
+                    rec = fut.result()
+                except Exception as exc:  # noqa: BLE001 -- a worker died
+                    rec = {"scenario": futs[fut], "error": {"stage": "worker", "message": f"{type(exc).__name__}: {exc}"}}
+                done(rec)
+    else:
+        for sc in scenarios:
+            done(run_scenario(sc))
+    if bar:
+        bar.close()
+    result = aggregate(by_family, meta | {"complete": True, "elapsed_s": time.perf_counter() - t_start})
+    if args.long:
+        result["long_log"] = run_long(args.long_minutes)
+    result = _jsonable(result)
+    write_atomic(out_path, result)
+    if result["families"]:
+        write_text_atomic(out_path.with_suffix(".md"), markdown_table(result))
+    print(json.dumps(result, indent=2))
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,96 @@
+"""The generalisation benchmark (issue 15, item 5): a shortened run in the default test run, the full one slow."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_generalization.py"
+FAMILIES = ("low_order_pacejka", "multi_body", "held_out")
+
+
+def _run(tmp_path: Path, *args: str, timeout: float) -> tuple[dict, dict, float]:
+    out = tmp_path / "generalization.json"
+    t0 = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, str(BENCH), *args, "--out", str(out), "--no-progress"],
+        capture_output=True, text=True, timeout=timeout,
+    )  # fmt: skip
+    wall = time.perf_counter() - t0
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    printed = json.loads(proc.stdout)  # stdout is the JSON and nothing else
+    written = json.loads(out.read_text())
+    assert not list(tmp_path.glob(".*.tmp")), "atomic write left a temporary file"
+    return printed, written, wall
+
+
+def _check_structure(result: dict, n: int) -> None:
+    assert result["benchmark"] == "generalization"
+    assert result["complete"] is True
+    assert set(result["families"]) == set(FAMILIES)
+    assert result["families"]["held_out"]["held_out"] is True
+    for fam in FAMILIES:
+        block = result["families"][fam]
+        assert len(block["scenarios"]) == n
+        for est in ("observer", "ukf"):
+            s = block[est]
+            for key in ("abs_stiffness_error_pct", "curve_nrmse_pct", "slip_rmse_deg", "runtime_s", "band_coverage"):
+                assert key in s
+        assert "verdict_counts" in block["observer"]
+        for rec in block["scenarios"]:
+            assert "error" not in rec, rec.get("error")  # no crash anywhere
+            for est in ("observer", "ukf"):
+                assert "error" not in rec[est], rec[est].get("error")
+                assert len(rec[est]["stiffness_error_pct"]) == 2
+            assert rec["ukf"]["camera_given"]["source"] == "estimated from the log"
+
+
+def test_quick_benchmark(tmp_path):
+    printed, written, wall = _run(tmp_path, "--quick", "--n", "1", "--workers", "2", timeout=240)
+    assert printed == written
+    _check_structure(written, 1)
+    # scenario sampling is seeded: the same settings give the same scenarios
+    scen = [r["scenario"] for fam in FAMILIES for r in written["families"][fam]["scenarios"]]
+    assert all(s["duration_s"] == 12.0 and s["camera"]["rate"] <= 25.0 for s in scen)
+    errors = [abs(e) for fam in FAMILIES for r in written["families"][fam]["scenarios"] for e in r["observer"]["stiffness_error_pct"]]
+    errors.sort()
+    median = 0.5 * (errors[len(errors) // 2 - 1] + errors[len(errors) // 2])
+    assert median < 10.0, errors  # loose: 12 s logs, nominal up to 20 % off
+    for fam in FAMILIES:
+        obs = written["families"][fam]["observer"]
+        assert obs["succeeded"] == 1
+        assert obs["slip_rmse_deg"]["worst"] < 1.0  # slip is tracked (deg)
+        assert 0.0 <= obs["band_coverage"]["fraction"] <= 1.0
+        assert written["families"][fam]["ukf"]["succeeded"] == 1
+
+
+def test_scenarios_are_seeded_and_prefix_stable():
+    sys.path.insert(0, str(BENCH.parent))
+    try:
+        import bench_generalization as bg
+    finally:
+        sys.path.remove(str(BENCH.parent))
+    a = [bg.sample_scenario(f, i, 15, False) for f in FAMILIES for i in range(3)]
+    b = [bg.sample_scenario(f, i, 15, False) for f in FAMILIES for i in range(3)]
+    assert a == b
+    for s in a:
+        cam = s["camera"]
+        assert 10.0 <= cam["rate"] <= 100.0 and cam["noise"] in ("gaussian", "uniform")
+        assert 0.005 <= cam["e1_noise"] <= 0.02 and 0.0 <= cam["latency"] <= 0.1 and 0.0 <= cam["dropout_probability"] <= 0.2
+        assert 15.0 <= s["speed"]["vx"] <= 35.0
+    held = [s for s in a if s["family"] == "held_out"]
+    tuned = [s for s in a if s["family"] != "held_out"]
+    assert {s["vehicle"] for s in held}.isdisjoint({s["vehicle"] for s in tuned})
+    assert {s["road"]["kind"] for s in held}.isdisjoint({s["road"]["kind"] for s in tuned})
+
+
+@pytest.mark.slow
+def test_full_benchmark(tmp_path):
+    _, written, _ = _run(tmp_path, timeout=3600)
+    _check_structure(written, written["settings"]["n_per_family"])
+    assert written["families"]["low_order_pacejka"]["observer"]["abs_stiffness_error_pct"]["median"] < 5.0
