@@ -85,6 +85,10 @@ class Model(NamedTuple):
     nx: int  # 2 (IMU) or 4 (camera, fused)
     q_force: np.ndarray  # (2,) force-error intensity front/rear [N^2 s]
     h_max: float  # largest integration sub-step [s]
+    ub: np.ndarray  # (2, NB) distinct activation bounds of each axle [rad] (shared by neighbouring members)
+    nub: np.ndarray  # (2,) int64: how many of ``ub`` are used per axle
+    ilo: np.ndarray  # (2, N) int64: index of each member's lower bound in ``ub``
+    ihi: np.ndarray  # (2, N) int64: ... of its upper bound
 
 
 class Gains(NamedTuple):
@@ -119,6 +123,9 @@ class Settings(NamedTuple):
     store_scores: bool
     compute_std: bool
     kalman: bool  # correct with the Kalman gain Sigma H^T S^-1 instead of the certified gain
+    record: bool  # store the per-row outputs (off: only the state and the accumulators are updated)
+    shift_frames: bool  # fixed mode, camera only: delayed frames applied at their instant in one forward
+    # sweep (the same corrections as the rewind-and-replay of the causal mode, without the replay)
 
 
 class State(NamedTuple):
@@ -184,26 +191,90 @@ def _half_tanh(x):
     return math.tanh(0.5 * x)
 
 
+def bound_table(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(ub, nub, ilo, ihi)`` of :class:`Model`: the distinct bounds of each axle's members
+    (neighbouring members share a bound, so each softplus is evaluated once per bound)."""
+    lower = np.asarray(lower, dtype=float)
+    upper = np.asarray(upper, dtype=float)
+    n_ax, N = lower.shape
+    tables = [np.unique(np.r_[lower[i], upper[i]]) for i in range(n_ax)]
+    NB = max(len(u) for u in tables)
+    ub = np.zeros((n_ax, NB))
+    nub = np.zeros(n_ax, dtype=np.int64)
+    ilo = np.zeros((n_ax, N), dtype=np.int64)
+    ihi = np.zeros((n_ax, N), dtype=np.int64)
+    for i, u in enumerate(tables):
+        ub[i, : len(u)] = u
+        nub[i] = len(u)
+        ilo[i] = np.searchsorted(u, lower[i])
+        ihi[i] = np.searchsorted(u, upper[i])
+    return ub, nub, ilo, ihi
+
+
 @njit(cache=True)
-def axle_basis(a, axle, M, w, phi, dphi):
-    """Activations ``gamma sigma`` (eq. 30) into ``phi[axle N : (axle+1) N]``, their slopes into
-    ``dphi``; returns ``(f, df/da)`` of the learned part of the axle force."""
-    N = M.lo.shape[1]
-    lam = M.lam
-    g = M.gamma[axle]
+def _bounds_eval(a, axle, lam, ub, nub, spm, spp, ht, slopes):
+    """Per distinct bound ``u`` of the axle, with ``x = lam (a - u)``: ``softplus(-x)`` into
+    ``spm``, ``softplus(x)`` into ``spp`` and (``slopes``) ``tanh(x / 2)`` into ``ht`` (one
+    exponential and one logarithm per bound, shared by the members meeting there)."""
+    for u in range(nub[axle]):
+        x = lam * (a - ub[axle, u])
+        ax_ = abs(x)
+        if ax_ > 40.0:
+            spp[u] = x if x > 0.0 else 0.0
+            spm[u] = -x if x < 0.0 else 0.0
+            if slopes:
+                ht[u] = 1.0 if x > 0.0 else -1.0
+            continue
+        em = math.expm1(-ax_)
+        l = math.log1p(1.0 + em) if ax_ <= 37.0 else 0.0
+        spp[u] = max(x, 0.0) + l
+        spm[u] = max(-x, 0.0) + l
+        if slopes:
+            th = -em / (2.0 + em)  # tanh(|x| / 2)
+            ht[u] = th if x >= 0.0 else -th
+
+
+@njit(cache=True)
+def _basis_arrays(a, axle, lam, g, ub, nub, ilo, ihi, off, w, phi, dphi, spm, spp, ht):
+    """:func:`axle_basis` on plain arrays (the hot path)."""
+    N = off.shape[1]
+    _bounds_eval(a, axle, lam, ub, nub, spm, spp, ht, True)
     f = 0.0
     k = 0.0
+    base = axle * N
     for j in range(N):
-        lo = M.lo[axle, j]
-        hi = M.hi[axle, j]
-        s = a + (_softplus(-lam * (a - lo)) - _softplus(lam * (a - hi))) / lam - M.off[axle, j]
-        d = 0.5 * (_half_tanh(lam * (a - lo)) - _half_tanh(lam * (a - hi)))
-        i = axle * N + j
-        phi[i] = g * s
-        dphi[i] = g * d
-        f += phi[i] * w[i]
-        k += dphi[i] * w[i]
+        ul = ilo[axle, j]
+        uh = ihi[axle, j]
+        s = a + (spm[ul] - spp[uh]) / lam - off[axle, j]
+        d = 0.5 * (ht[ul] - ht[uh])
+        p = g * s
+        dp = g * d
+        phi[base + j] = p
+        dphi[base + j] = dp
+        f += p * w[base + j]
+        k += dp * w[base + j]
     return f, k
+
+
+@njit(cache=True)
+def _force_arrays(a, axle, lam, g, ub, nub, ilo, ihi, off, w, spm, spp):
+    """The learned part of the axle force alone (no activations stored, no slopes)."""
+    N = off.shape[1]
+    _bounds_eval(a, axle, lam, ub, nub, spm, spp, spm, False)
+    f = 0.0
+    base = axle * N
+    for j in range(N):
+        s = a + (spm[ilo[axle, j]] - spp[ihi[axle, j]]) / lam - off[axle, j]
+        f += s * w[base + j]
+    return g * f
+
+
+@njit(cache=True)
+def axle_basis(a, axle, M, w, phi, dphi, wk):
+    """Activations ``gamma sigma`` (eq. 30) into ``phi[axle N : (axle+1) N]``, their slopes into
+    ``dphi``; returns ``(f, df/da)`` of the learned part of the axle force."""
+    return _basis_arrays(a, axle, M.lam, M.gamma[axle], M.ub, M.nub, M.ilo, M.ihi, M.off, w, phi, dphi, wk.spm,
+                         wk.spp, wk.ht)  # fmt: skip
 
 
 @njit(cache=True)
@@ -214,24 +285,38 @@ def slip_angles(vy, r, delta, vx, lf, lr):
 
 
 @njit(cache=True)
-def forces(vy, r, delta, vx, w, M, phi, dphi):
+def forces(vy, r, delta, vx, w, M, wk):
     """``(alpha_f, alpha_r, F_f, F_r, f_f, f_r, k_f, k_r)``: slips, total and learned axle
     forces [N] and total slopes [N/rad]; fills ``phi``/``dphi`` (eqs. 13, 14, 29)."""
     af, ar = slip_angles(vy, r, delta, vx, M.veh[2], M.veh[3])
-    ff, kf = axle_basis(af, 0, M, w, phi, dphi)
-    fr, kr = axle_basis(ar, 1, M, w, phi, dphi)
+    ff, kf = axle_basis(af, 0, M, w, wk.phi, wk.dphi, wk)
+    fr, kr = axle_basis(ar, 1, M, w, wk.phi, wk.dphi, wk)
     return af, ar, M.veh[4] * af + ff, M.veh[5] * ar + fr, ff, fr, M.veh[4] + kf, M.veh[5] + kr
 
 
 @njit(cache=True)
-def _rhs(x, delta, cd, vx, kappa, w, M, phi, dphi, out):
-    """``out = x_dot``; returns the total slopes ``(k_f, k_r)`` at ``x``."""
-    m, Iz, lf, lr = M.veh[0], M.veh[1], M.veh[2], M.veh[3]
+def _rhs_arrays(x, delta, cd, vx, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, out,
+                full):  # fmt: skip
+    """``out = x_dot``; returns the total slopes ``(k_f, k_r)`` at ``x`` (``full``: also the
+    activations ``phi``, ``dphi``; else the forces alone and zero slopes)."""
+    m, Iz, lf, lr = veh[0], veh[1], veh[2], veh[3]
     v = vx if vx > V_FLOOR else V_FLOOR
-    _, _, Ff, Fr, _, _, kf, kr = forces(x[VY], x[R], delta, v, w, M, phi, dphi)
+    af, ar = slip_angles(x[VY], x[R], delta, v, lf, lr)
+    if full:
+        ff, kf = _basis_arrays(af, 0, lam, gam[0], ub, nub, ilo, ihi, off, w, phi, dphi, spm, spp, ht)
+        fr, kr = _basis_arrays(ar, 1, lam, gam[1], ub, nub, ilo, ihi, off, w, phi, dphi, spm, spp, ht)
+        kf += veh[4]
+        kr += veh[5]
+    else:
+        ff = _force_arrays(af, 0, lam, gam[0], ub, nub, ilo, ihi, off, w, spm, spp)
+        fr = _force_arrays(ar, 1, lam, gam[1], ub, nub, ilo, ihi, off, w, spm, spp)
+        kf = 0.0
+        kr = 0.0
+    Ff = veh[4] * af + ff
+    Fr = veh[5] * ar + fr
     out[VY] = (Ff * cd + Fr) / m - v * x[R]
     out[R] = (lf * Ff * cd - lr * Fr) / Iz
-    if M.nx == 4:
+    if nx == 4:
         out[E1] = x[VY] + v * x[E2]
         out[E2] = x[R] - v * kappa
     return kf, kr
@@ -273,12 +358,16 @@ class _Work(NamedTuple):
     Kw: np.ndarray  # (nw, 2)
     dw: np.ndarray  # (nw,)
     Lk: np.ndarray  # (nx, 2) Kalman gain
+    spm: np.ndarray  # (NB,) softplus(-lam (a - u)) per distinct bound u
+    spp: np.ndarray  # (NB,) softplus(lam (a - u))
+    ht: np.ndarray  # (NB,) tanh(lam (a - u) / 2)
 
 
-def make_work(nx: int, nw: int) -> _Work:
+def make_work(nx: int, nw: int, nb: int = 64) -> _Work:
     e = np.empty
     return _Work(e(nw), e(nw), e(nx), e(nx), e(nx), e(nx), e(nx), e((nx, nx)), e((nx, nx)), e((nx, nx)),
-                 e((nx, nx)), e((nx, nw)), e((2, nx)), e((2, nw)), e((2, nw)), e((2, nw)), e((nw, 2)), e(nw), e((nx, 2)))  # fmt: skip
+                 e((nx, nx)), e((nx, nw)), e((2, nx)), e((2, nw)), e((2, nw)), e((2, nw)), e((nw, 2)), e(nw), e((nx, 2)),
+                 e(nb), e(nb), e(nb))  # fmt: skip
 
 
 @njit(cache=True)
@@ -287,87 +376,107 @@ def predict(st, dt, delta, vx0, ax, kappa, M, S, wk):
     inputs held (speed ramps with ``ax``)."""
     if dt <= 0.0:
         return
-    nx = M.nx
-    nw = st.w.shape[0]
-    N2 = 2 * M.lo.shape[1]
-    m, Iz, lf, lr = M.veh[0], M.veh[1], M.veh[2], M.veh[3]
-    n_sub = int(math.ceil(dt / M.h_max - 1e-9))
+    _predict_arrays(dt, delta, vx0, ax, kappa, st.x, st.w, st.ups, st.sig, M.veh, M.nx, M.lam, M.gamma, M.ub, M.nub,
+                    M.ilo, M.ihi, M.off, M.q_force, M.h_max, wk.phi, wk.dphi, wk.spm, wk.spp, wk.ht, wk.k1, wk.k2,
+                    wk.k3, wk.k4, wk.y, wk.J, wk.Phi, wk.Gm, wk.T1, wk.U)  # fmt: skip
+    if S.mode == MODE_CAUSAL and S.adapt and S.q_w > 0.0:
+        for a in range(st.w.shape[0]):
+            st.pw[a, a] += S.q_w * dt
+
+
+@njit(cache=True)
+def _predict_arrays(dt, delta, vx0, ax, kappa, x, w, ups, sig, veh, nx, lam, gam, ub, nub, ilo, ihi, off, q_force,
+                    h_max, phi, dphi, spm, spp, ht, k1, k2, k3, k4, y, J, Phi, Gm, T1, U):  # fmt: skip
+    """:func:`predict` on plain arrays (the hot path: no tuple access inside the loops)."""
+    nw = w.shape[0]
+    N2 = 2 * off.shape[1]
+    m, Iz, lf, lr = veh[0], veh[1], veh[2], veh[3]
+    n_sub = int(math.ceil(dt / h_max - 1e-9))
     if n_sub < 1:
         n_sub = 1
     h = dt / n_sub
     cd = math.cos(delta)
-    x = st.x
     for s in range(n_sub):
         v0 = vx0 + ax * s * h
         vm = v0 + 0.5 * h * ax
         v1 = v0 + h * ax
-        kf, kr = _rhs(x, delta, cd, v0, kappa, st.w, M, wk.phi, wk.dphi, wk.k1)
+        kf, kr = _rhs_arrays(x, delta, cd, v0, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp,
+                             ht, k1, True)  # fmt: skip
         # linearised transition over the sub-step: Phi = I + hJ + (hJ)^2/2, Gm = h (I + hJ/2)
-        _jacobian(cd, v0, kf, kr, M, wk.J)
+        vj = v0 if v0 > V_FLOOR else V_FLOOR
+        J[:, :] = 0.0
+        J[VY, VY] = -(kf * cd + kr) / (m * vj)
+        J[VY, R] = -(kf * cd * lf - kr * lr) / (m * vj) - vj
+        J[R, VY] = -(lf * kf * cd - lr * kr) / (Iz * vj)
+        J[R, R] = -(lf * lf * kf * cd + lr * lr * kr) / (Iz * vj)
+        if nx == 4:
+            J[E1, VY] = 1.0
+            J[E1, E2] = vj
+            J[E2, R] = 1.0
         for i in range(nx):
             for j in range(nx):
                 acc = 0.0
                 for q in range(nx):
-                    acc += wk.J[i, q] * wk.J[q, j]
-                wk.Phi[i, j] = h * wk.J[i, j] + 0.5 * h * h * acc
-                wk.Gm[i, j] = 0.5 * h * h * wk.J[i, j]
-            wk.Phi[i, i] += 1.0
-            wk.Gm[i, i] += h
+                    acc += J[i, q] * J[q, j]
+                Phi[i, j] = h * J[i, j] + 0.5 * h * h * acc
+                Gm[i, j] = 0.5 * h * h * J[i, j]
+            Phi[i, i] += 1.0
+            Gm[i, i] += h
         # Upsilon <- Phi Upsilon + Gm B_w (B_w: force input of each weight)
         ev0f, ev1f = cd / m, lf * cd / Iz
         ev0r, ev1r = 1.0 / m, -lr / Iz
         for a in range(nw):
             if a < N2:
                 if a < N2 // 2:
-                    b0 = ev0f * wk.phi[a]
-                    b1 = ev1f * wk.phi[a]
+                    b0 = ev0f * phi[a]
+                    b1 = ev1f * phi[a]
                 else:
-                    b0 = ev0r * wk.phi[a]
-                    b1 = ev1r * wk.phi[a]
+                    b0 = ev0r * phi[a]
+                    b1 = ev1r * phi[a]
             else:
                 b0 = 0.0
                 b1 = 0.0
             for i in range(nx):
-                acc = wk.Gm[i, VY] * b0 + wk.Gm[i, R] * b1
+                acc = Gm[i, VY] * b0 + Gm[i, R] * b1
                 for q in range(nx):
-                    acc += wk.Phi[i, q] * st.ups[q, a]
-                wk.U[i, a] = acc
+                    acc += Phi[i, q] * ups[q, a]
+                U[i, a] = acc
         for i in range(nx):
             for a in range(nw):
-                st.ups[i, a] = wk.U[i, a]
+                ups[i, a] = U[i, a]
         # Sigma <- Phi Sigma Phi^T + h Q (force-error intensity on both axles)
         for i in range(nx):
             for j in range(nx):
                 acc = 0.0
                 for q in range(nx):
-                    acc += wk.Phi[i, q] * st.sig[q, j]
-                wk.T1[i, j] = acc
+                    acc += Phi[i, q] * sig[q, j]
+                T1[i, j] = acc
         for i in range(nx):
             for j in range(nx):
                 acc = 0.0
                 for q in range(nx):
-                    acc += wk.T1[i, q] * wk.Phi[j, q]
-                st.sig[i, j] = acc
-        qf, qr = M.q_force[0] * h, M.q_force[1] * h
-        st.sig[VY, VY] += qf * ev0f * ev0f + qr * ev0r * ev0r
-        st.sig[VY, R] += qf * ev0f * ev1f + qr * ev0r * ev1r
-        st.sig[R, VY] += qf * ev0f * ev1f + qr * ev0r * ev1r
-        st.sig[R, R] += qf * ev1f * ev1f + qr * ev1r * ev1r
+                    acc += T1[i, q] * Phi[j, q]
+                sig[i, j] = acc
+        qf, qr = q_force[0] * h, q_force[1] * h
+        sig[VY, VY] += qf * ev0f * ev0f + qr * ev0r * ev0r
+        sig[VY, R] += qf * ev0f * ev1f + qr * ev0r * ev1r
+        sig[R, VY] += qf * ev0f * ev1f + qr * ev0r * ev1r
+        sig[R, R] += qf * ev1f * ev1f + qr * ev1r * ev1r
         # RK4 of the state (the speed ramps within the sub-step)
         for i in range(nx):
-            wk.y[i] = x[i] + 0.5 * h * wk.k1[i]
-        _rhs(wk.y, delta, cd, vm, kappa, st.w, M, wk.phi, wk.dphi, wk.k2)
+            y[i] = x[i] + 0.5 * h * k1[i]
+        _rhs_arrays(y, delta, cd, vm, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k2,
+                    False)  # fmt: skip
         for i in range(nx):
-            wk.y[i] = x[i] + 0.5 * h * wk.k2[i]
-        _rhs(wk.y, delta, cd, vm, kappa, st.w, M, wk.phi, wk.dphi, wk.k3)
+            y[i] = x[i] + 0.5 * h * k2[i]
+        _rhs_arrays(y, delta, cd, vm, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k3,
+                    False)  # fmt: skip
         for i in range(nx):
-            wk.y[i] = x[i] + h * wk.k3[i]
-        _rhs(wk.y, delta, cd, v1, kappa, st.w, M, wk.phi, wk.dphi, wk.k4)
+            y[i] = x[i] + h * k3[i]
+        _rhs_arrays(y, delta, cd, v1, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k4,
+                    False)  # fmt: skip
         for i in range(nx):
-            x[i] += h / 6.0 * (wk.k1[i] + 2.0 * wk.k2[i] + 2.0 * wk.k3[i] + wk.k4[i])
-    if S.mode == MODE_CAUSAL and S.adapt and S.q_w > 0.0:
-        for a in range(nw):
-            st.pw[a, a] += S.q_w * dt
+            x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
 
 
 # -- corrections ------------------------------------------------------------------------------
@@ -406,7 +515,7 @@ def _measurement(group, st, delta, vx, M, S, zk, wk):
         m, lf, lr = M.veh[0], M.veh[2], M.veh[3]
         v = vx if vx > V_FLOOR else V_FLOOR
         cd = math.cos(delta)
-        _, _, Ff, Fr, _, _, kf, kr = forces(x[VY], x[R], delta, v, st.w, M, wk.phi, wk.dphi)
+        _, _, Ff, Fr, _, _, kf, kr = forces(x[VY], x[R], delta, v, st.w, M, wk)
         h0 = (Ff * cd + Fr) / m
         h1 = x[R]
         wk.H[0, VY] = -(kf * cd + kr) / (m * v)
@@ -478,19 +587,36 @@ def update(group, st, delta, vx, zk, M, G, S, adapt, accumulate, acc, score, k, 
         sx11 = 1.0
         sx01 = 0.0
     # weight part: Psi P_w Psi^T
-    for c in range(2):
-        for b in range(nw):
-            acc_ = 0.0
-            for a in range(nw):
-                acc_ += wk.Psi[c, a] * st.pw[a, b]
-            wk.PsiP[c, b] = acc_
     sw00 = 0.0
     sw01 = 0.0
     sw11 = 0.0
-    for a in range(nw):
-        sw00 += wk.PsiP[0, a] * wk.Psi[0, a]
-        sw01 += wk.PsiP[0, a] * wk.Psi[1, a]
-        sw11 += wk.PsiP[1, a] * wk.Psi[1, a]
+    if adapt:  # P_w Psi^T is needed for the gain
+        for c in range(2):
+            for b in range(nw):
+                acc_ = 0.0
+                for a in range(nw):
+                    acc_ += wk.Psi[c, a] * st.pw[a, b]
+                wk.PsiP[c, b] = acc_
+        for a in range(nw):
+            sw00 += wk.PsiP[0, a] * wk.Psi[0, a]
+            sw01 += wk.PsiP[0, a] * wk.Psi[1, a]
+            sw11 += wk.PsiP[1, a] * wk.Psi[1, a]
+    else:  # the quadratic form alone, from the upper triangle of the (symmetric) P_w
+        for a in range(nw):
+            pa0 = wk.Psi[0, a]
+            pa1 = wk.Psi[1, a]
+            if pa0 == 0.0 and pa1 == 0.0:
+                continue
+            t0 = 0.0
+            t1 = 0.0
+            for b in range(a + 1, nw):
+                pab = st.pw[a, b]
+                t0 += pab * wk.Psi[0, b]
+                t1 += pab * wk.Psi[1, b]
+            paa = st.pw[a, a]
+            sw00 += pa0 * (paa * pa0 + 2.0 * t0)
+            sw11 += pa1 * (paa * pa1 + 2.0 * t1)
+            sw01 += pa0 * (paa * pa1 + t1) + pa1 * t0
     i00, i01, i11 = _inv2(sx00 + sw00, sx01 + sw01, sx11 + sw11)
     nis = nu0 * nu0 * i00 + 2.0 * nu0 * nu1 * i01 + nu1 * nu1 * i11
     nu0_prior = nu0 if p0 else np.nan
@@ -501,11 +627,9 @@ def update(group, st, delta, vx, zk, M, G, S, adapt, accumulate, acc, score, k, 
         for a in range(nw):
             q0 = j00 * wk.Psi[0, a] + j01 * wk.Psi[1, a]
             q1 = j01 * wk.Psi[0, a] + j11 * wk.Psi[1, a]
-            for b in range(a, nw):
-                v_ = q0 * wk.Psi[0, b] + q1 * wk.Psi[1, b]
-                acc.hess[a, b] += v_
-                if b != a:
-                    acc.hess[b, a] += v_
+            if q0 != 0.0 or q1 != 0.0:
+                for b in range(a, nw):  # upper triangle; run_rows mirrors it at the end
+                    acc.hess[a, b] += q0 * wk.Psi[0, b] + q1 * wk.Psi[1, b]
             sc = q0 * nu0 + q1 * nu1
             acc.grad[a] += sc
             if S.store_scores:
@@ -806,8 +930,39 @@ def delayed_camera(st, zk, M, G, S, adapt, accumulate, acc, score, k, wk, zrow):
 
 # -- the loop ---------------------------------------------------------------------------------
 @njit(cache=True)
+def _frame_instant(t, k, latency, H):
+    """``(j, dtp)``: the row ``j`` whose interval holds the instant frame ``k`` shows, and the
+    offset of that instant in it (exactly the rewind target of :func:`delayed_camera` with a
+    history of ``H`` rows started at row 0)."""
+    tau = t[k] - latency
+    oldest = k - H + 1
+    if oldest < 0:
+        oldest = 0
+    j = k
+    while j > oldest and t[j] > tau:
+        j -= 1
+    d = tau - t[j]
+    return j, (d if d > 0.0 else 0.0)
+
+
+@njit(cache=True)
+def _next_frame(z, k):
+    """First row at or after ``k`` with a camera channel (``len(z)`` if none)."""
+    n = z.shape[0]
+    while k < n and not (z[k, CH_E1] == z[k, CH_E1] or z[k, CH_E2] == z[k, CH_E2]):
+        k += 1
+    return k
+
+
+@njit(cache=True)
 def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last):
-    """Process all rows (module docstring); state, health and accumulators are updated in place."""
+    """Process all rows (module docstring); state, health and accumulators are updated in place.
+
+    With ``S.shift_frames`` (fixed mode, camera only, a latency, nothing recorded) every
+    delayed frame is applied at the instant it shows while sweeping forward, which gives the
+    same corrections and accumulated fit as the rewind-and-replay of :func:`delayed_camera`
+    at the cost of one prediction per row.
+    """
     n = t.shape[0]
     nx = M.nx
     nw = st.w.shape[0]
@@ -815,17 +970,22 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
     zk = np.empty(N_CHANNELS)
     delayed = S.use_cam and S.latency > 0.0
     causal = S.mode == MODE_CAUSAL
+    shift = delayed and S.shift_frames and S.mode == MODE_FIXED and not S.use_imu and not S.record
+    H = st.hist_t.shape[0]
+    nf = _next_frame(z, 0) if shift else n
     for k in range(n):
         tk = t[k]
         for c in range(N_CHANNELS):
             zk[c] = z[k, c]
-            out.nu[k, c] = np.nan
-        if delayed:
+        if S.record:
+            for c in range(N_CHANNELS):
+                out.nu[k, c] = np.nan
+        if delayed and not shift:
             _push_history(st, tk, delta[k], vx[k], ax[k], kappa[k], zk)
         accumulate = S.mode == MODE_FIXED and tk >= S.accumulate_from
         nis_row = 0.0
         dof_row = 0
-        if S.use_cam and (zk[CH_E1] == zk[CH_E1] or zk[CH_E2] == zk[CH_E2]):
+        if not shift and S.use_cam and (zk[CH_E1] == zk[CH_E1] or zk[CH_E2] == zk[CH_E2]):
             adapt_now = causal and S.adapt and st.hs[HS_CODE] == HEALTH_OK and tk >= S.settle_until
             if delayed:
                 nis, dof, n0, n1 = delayed_camera(st, zk, M, G, S, adapt_now, accumulate, acc, out.score, k, wk, zrow)
@@ -833,8 +993,9 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
                 nis, dof, n0, n1 = update(GROUP_CAMERA, st, delta[k], vx[k], zk, M, G, S, adapt_now, accumulate, acc,
                                           out.score, k, wk)  # fmt: skip
             if dof > 0:
-                out.nu[k, CH_E1] = n0
-                out.nu[k, CH_E2] = n1
+                if S.record:
+                    out.nu[k, CH_E1] = n0
+                    out.nu[k, CH_E2] = n1
                 nis_row += nis
                 dof_row += dof
                 _health_push(st, tk, nis, dof, S, M)
@@ -843,39 +1004,66 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
             nis, dof, n0, n1 = update(GROUP_IMU, st, delta[k], vx[k], zk, M, G, S, adapt_now, accumulate, acc,
                                       out.score, k, wk)  # fmt: skip
             if dof > 0:
-                out.nu[k, CH_AY] = n0
-                out.nu[k, CH_R] = n1
+                if S.record:
+                    out.nu[k, CH_AY] = n0
+                    out.nu[k, CH_R] = n1
                 nis_row += nis
                 dof_row += dof
                 _health_push(st, tk, nis, dof, S, M)
         _health_tick(st, tk, S, M)
-        # record the posterior
-        af, ar, Ff, Fr, ff, fr, _, _ = forces(st.x[VY], st.x[R], delta[k], vx[k], st.w, M, wk.phi, wk.dphi)
-        for i in range(nx):
-            out.x[k, i] = st.x[i]
-        out.slip[k, 0] = af
-        out.slip[k, 1] = ar
-        out.fnl[k, 0] = ff
-        out.fnl[k, 1] = fr
-        out.force[k, 0] = Ff
-        out.force[k, 1] = Fr
-        out.nis[k] = nis_row if dof_row > 0 else np.nan
-        out.health[k] = int(st.hs[HS_CODE])
-        if S.store_weights:
-            for a in range(nw):
-                out.w[k, a] = st.w[a]
-        if S.compute_std:
+        if S.record:  # the posterior
+            af, ar, Ff, Fr, ff, fr, _, _ = forces(st.x[VY], st.x[R], delta[k], vx[k], st.w, M, wk)
             for i in range(nx):
-                var = st.sig[i, i]
+                out.x[k, i] = st.x[i]
+            out.slip[k, 0] = af
+            out.slip[k, 1] = ar
+            out.fnl[k, 0] = ff
+            out.fnl[k, 1] = fr
+            out.force[k, 0] = Ff
+            out.force[k, 1] = Fr
+            out.nis[k] = nis_row if dof_row > 0 else np.nan
+            out.health[k] = int(st.hs[HS_CODE])
+            if S.store_weights:
                 for a in range(nw):
-                    ua = st.ups[i, a]
-                    if ua != 0.0:
-                        row = 0.0
-                        for b in range(nw):
-                            row += st.pw[a, b] * st.ups[i, b]
-                        var += ua * row
-                out.std[k, i] = math.sqrt(max(var, 0.0))
-        if k < n - 1:
-            predict(st, t[k + 1] - tk, delta[k], vx[k], ax[k], kappa[k], M, S, wk)
-        elif predict_last:
-            predict(st, S.dt_last, delta[k], vx[k], ax[k], kappa[k], M, S, wk)
+                    out.w[k, a] = st.w[a]
+            if S.compute_std:
+                for i in range(nx):  # sig_ii + ups_i P_w ups_i^T from the upper triangle of P_w
+                    var = st.sig[i, i]
+                    for a in range(nw):
+                        ua = st.ups[i, a]
+                        if ua != 0.0:
+                            row = 0.0
+                            for b in range(a + 1, nw):
+                                row += st.pw[a, b] * st.ups[i, b]
+                            var += ua * (st.pw[a, a] * ua + 2.0 * row)
+                    out.std[k, i] = math.sqrt(max(var, 0.0))
+        if k < n - 1 or predict_last:
+            dt_row = t[k + 1] - tk if k < n - 1 else S.dt_last
+            if shift:
+                # the frames showing an instant of this interval, in order, then the rest of it
+                done = 0.0
+                while nf < n:
+                    j, dtp = _frame_instant(t, nf, S.latency, H)
+                    if j > k:
+                        break
+                    if dtp < done:
+                        dtp = done
+                    if dtp > done:
+                        predict(st, dtp - done, delta[k], vx[k] + ax[k] * done, ax[k], kappa[k], M, S, wk)
+                    done = dtp
+                    for c in range(N_CHANNELS):
+                        zrow[c] = z[nf, c]
+                    acc_f = t[nf] >= S.accumulate_from
+                    nis, dof, n0, n1 = update(GROUP_CAMERA, st, delta[k], vx[k] + ax[k] * dtp, zrow, M, G, S, False,
+                                              acc_f, acc, out.score, nf, wk)  # fmt: skip
+                    if dof > 0:
+                        _health_push(st, t[nf], nis, dof, S, M)
+                    nf = _next_frame(z, nf + 1)
+                if k < n - 1 or predict_last:
+                    predict(st, dt_row - done, delta[k], vx[k] + ax[k] * done, ax[k], kappa[k], M, S, wk)
+            else:
+                predict(st, dt_row, delta[k], vx[k], ax[k], kappa[k], M, S, wk)
+    if S.mode == MODE_FIXED:  # the fit's normal matrix is accumulated in its upper triangle
+        for a in range(nw):
+            for b in range(a + 1, nw):
+                acc.hess[b, a] = acc.hess[a, b]

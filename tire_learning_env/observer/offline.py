@@ -76,10 +76,20 @@ def newey_west_variance(u: NDArray, max_lag: int | None = None) -> NDArray:
         return np.sum(u**2, axis=0)
     u = u - u.mean(axis=0)
     nfft = 1 << int(math.ceil(math.log2(2 * n)))
-    F = np.fft.rfft(u, nfft, axis=0)
-    acov = np.fft.irfft(F * np.conj(F), nfft, axis=0)[:n]  # sum_k u_k u_{k+l}
+    d = u.shape[1]
+    keep = n // 4 + 1 if max_lag is None else min(max_lag + 1, n)
+    acov = np.empty((keep, d))  # sum_k u_k u_{k+l}, the lags that can be used
+    rho_sum = np.zeros(n)
+    step = max(1, int(2**22 // nfft))  # columns per FFT: a few tens of MB whatever the log length
+    for c in range(0, d, step):
+        F = np.fft.rfft(u[:, c : c + step], nfft, axis=0)
+        a = np.fft.irfft(F * np.conj(F), nfft, axis=0)[:n]
+        del F
+        if max_lag is None:
+            rho_sum += np.sum(np.abs(a / np.maximum(a[0], 1e-300)), axis=1)
+        acov[:, c : c + step] = a[:keep]
     if max_lag is None:
-        rho = np.mean(np.abs(acov / np.maximum(acov[0], 1e-300)), axis=1)
+        rho = rho_sum / d
         below = np.flatnonzero(rho < 2.0 / math.sqrt(n))
         first = int(below[0]) if len(below) else n // 4
         max_lag = int(min(max(4 * first, 4 * n ** (2.0 / 9.0)), n // 4))
@@ -164,7 +174,8 @@ def _pass(observer, sensors, w, fit_from, gate, final=False):
     acc = K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4))
     observer.reset(weights=w)
     tr = observer.run(sensors, mode="fixed", accumulator=acc, accumulate_from=fit_from, gate=gate, store_scores=final,
-                      compute_std=final, store_weights=False, kalman=True)  # fmt: skip
+                      compute_std=final, store_weights=False, kalman=True, record=final,
+                      shift_frames=not final)  # fmt: skip
     return acc, tr
 
 

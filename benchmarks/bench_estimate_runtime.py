@@ -1,0 +1,119 @@
+"""Runtime of :func:`~tire_learning_env.observer.estimate` with default settings (issue 15's
+target: a 30 min, 100 Hz log in <= 10 s and <= 500 MB), printed as JSON.
+
+Two logs, each estimated in its own process (so the peak memory is that log's):
+
+- ``study1_60s_1kHz``: the Study 1 truth (60 s, rows and a noise-free camera at 1 kHz), the
+  nominal vehicle right;
+- ``lane_changes_30min_100Hz``: ``simulate("lane_changes", 1800, physics_rate=100)`` with the
+  paper's camera noise at 20 Hz, the nominal stiffness +8 % / -6 % off.
+
+Per log: the wall time of each step (:attr:`~tire_learning_env.observer.EstimationResult.runtime_s`),
+the process CPU time, rows per second, the fixed-weight passes of the offline fit and the
+latency profile (count, seconds), the peak resident memory (``ru_maxrss``) and, so that speed
+is never bought with accuracy, the estimated stiffness, its two-sigma band and its error
+against the truth. BLAS runs single-threaded (``_common``), as everywhere in the benchmarks.
+
+Run: ``python benchmarks/bench_estimate_runtime.py`` (``--log NAME`` for one log).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+
+from _common import emit
+
+LOGS = ("study1_60s_1kHz", "lane_changes_30min_100Hz")
+TARGET = {"wall_s": 10.0, "peak_MB": 500.0}
+
+
+def _make_log(name: str):
+    from tire_learning_env.params import CameraParams
+    from tire_learning_env.simulation import simulate
+    from tire_learning_env.studies import _simulate, study_spec
+
+    if name == "study1_60s_1kHz":
+        spec = study_spec(1)
+        log, _ = _simulate(spec)
+        return log.sensors, log.vehicle, spec.nominal_vehicle
+    log = simulate("lane_changes", 1800.0, camera=CameraParams.paper_noise(rate=20.0), physics_rate=100.0)
+    v = log.vehicle
+    return log.sensors, v, v.replace(Cf=v.Cf * 1.08, Cr=v.Cr * 0.94)
+
+
+def run_one(name: str) -> dict:
+    """Estimate one log in this process; the figures of :data:`LOGS`."""
+    import numpy as np
+
+    import tire_learning_env.observer._kernel as K
+    from tire_learning_env.observer import estimate
+
+    sensors, truth, nominal = _make_log(name)
+    passes: list = []
+    orig = K.run_rows
+
+    def timed(*a):  # every pass of the compiled loop, with its row count
+        t0 = time.perf_counter()
+        out = orig(*a)
+        passes.append((len(a[0]), int(a[8].mode), time.perf_counter() - t0))
+        return out
+
+    # warm the compiled kernel (numba cache) on a short slice so that compilation is not timed
+    short = {k: np.asarray(v)[:2000] for k, v in sensors.items()}
+    estimate(short, nominal)
+    K.run_rows = timed
+    try:
+        t0, c0 = time.perf_counter(), time.process_time()
+        res = estimate(sensors, nominal)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    finally:
+        K.run_rows = orig
+    n = len(np.asarray(sensors["t"]))
+    cf, cr = res.cornering_stiffness()
+    sf, sr = res.cornering_stiffness_std()
+    fixed = [p for p in passes if p[1] == K.MODE_FIXED]
+    return {
+        "rows": n,
+        "duration_s": float(sensors["t"][-1] - sensors["t"][0]),
+        "wall_s": round(wall, 3),
+        "cpu_s": round(cpu, 3),
+        "rows_per_s": round(n / wall, 1),
+        "steps_s": {k: round(float(v), 3) for k, v in res.runtime_s.items()},
+        "fixed_passes": len(fixed),
+        "fixed_pass_rows": int(sum(p[0] for p in fixed)),
+        "fixed_passes_s": round(sum(p[2] for p in fixed), 3),
+        "us_per_row_per_pass": round(1e6 * sum(p[2] for p in fixed) / max(sum(p[0] for p in fixed), 1), 3),
+        "peak_MB": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+        "latency_s": res.calibration.get("latency", {}).get("latency_s"),
+        "offline_iterations": res.fit.iterations if res.fit is not None else None,
+        "stiffness_N_per_rad": [cf, cr],
+        "stiffness_2sigma_N_per_rad": [2 * sf, 2 * sr],
+        "stiffness_error_pct": [100.0 * (cf / truth.Cf - 1.0), 100.0 * (cr / truth.Cr - 1.0)],
+        "nominal_error_pct": [100.0 * (nominal.Cf / truth.Cf - 1.0), 100.0 * (nominal.Cr / truth.Cr - 1.0)],
+        "verdict": res.verdict,
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--log", choices=LOGS, help="one log, in this process")
+    args = ap.parse_args()
+    if args.log:
+        print(json.dumps(run_one(args.log)))
+        return
+    out: dict = {"target_30min_100Hz": TARGET, "logs": {}}
+    for name in LOGS:
+        p = subprocess.run([sys.executable, __file__, "--log", name], capture_output=True, text=True, check=True)
+        out["logs"][name] = json.loads(p.stdout.strip().splitlines()[-1])
+    long = out["logs"]["lane_changes_30min_100Hz"]
+    out["meets_target"] = {"wall": long["wall_s"] <= TARGET["wall_s"], "memory": long["peak_MB"] <= TARGET["peak_MB"]}
+    emit(out)
+
+
+if __name__ == "__main__":
+    main()
