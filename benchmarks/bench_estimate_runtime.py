@@ -108,7 +108,7 @@ def main() -> None:
         return
     out: dict = {"target_30min_100Hz": TARGET, "logs": {}}
     for name in LOGS:
-        p = subprocess.run([sys.executable, __file__, "--log", name], capture_output=True, text=True, check=True)
+        p = subprocess.run([sys.executable, __file__, "--log", name], stdout=subprocess.PIPE, text=True, check=True)
         out["logs"][name] = json.loads(p.stdout.strip().splitlines()[-1])
     long = out["logs"]["lane_changes_30min_100Hz"]
     out["meets_target"] = {"wall": long["wall_s"] <= TARGET["wall_s"], "memory": long["peak_MB"] <= TARGET["peak_MB"]}
