@@ -209,7 +209,7 @@ def test_single_sample_steering_spike_is_removed_and_reported(tmp_path):
     [
         (lambda c: c.pop("ay"), "needs columns yaw_rate"),
         (lambda c: c.__setitem__("yaw_rate", np.degrees(c["yaw_rate"]) * 20), "deg/s"),
-        (lambda c: c.__setitem__("ay", c["ay"] / 9.81), "ay in g"),
+        (lambda c: c.__setitem__("ay", c["ay"] / 9.81), "'ay' looks like g"),
         (lambda c: c.__setitem__("ay", -c["ay"]), "opposite sign convention of ay"),
         (lambda c: c.__setitem__("delta", -c["delta"]), "opposite steering sign"),
         (lambda c: c.__setitem__("t", np.r_[c["t"][:300], c["t"][300:] + 0.5]), "non-uniform sampling"),

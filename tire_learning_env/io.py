@@ -456,10 +456,15 @@ def _check_imu_kinematics(columns, source, fix) -> None:
         return
     if 0.4 <= k <= 2.5:
         return
-    if 0.2 <= k < 0.4:
+    if -2.5 <= k <= -0.4:
+        why = ("ay and yaw_rate have the opposite sign convention of ay (the log format: ay and yaw_rate both "
+               "positive to the left); flip one of them")
+    elif 0.2 <= k < 0.4:
         why = "'vx' looks like km/h (must be m/s)"
     elif 0.012 <= k <= 0.025:
         why = "'yaw_rate' looks like deg/s (must be rad/s)"
+    elif 0 < k < 0.012:
+        why = "'yaw_rate' is far too large for the a_y: it looks like deg/s or another unit (must be rad/s)"
     elif 0.07 <= k <= 0.14:
         why = "'ay' looks like g (must be m/s^2)"
     else:
