@@ -46,3 +46,143 @@ def test_reproduce_study1_writes_metrics_and_figures(tmp_path):
 def test_console_script_is_installed():
     res = subprocess.run([sys.executable, "-m", "tire_learning_env.cli", "--help"], capture_output=True, text=True)
     assert res.returncode == 0 and "simulate" in res.stdout and "reproduce" in res.stdout
+
+
+# --- issue 17 item 6: one CLI grammar --------------------------------------------------------------
+
+COMMANDS = ("simulate", "estimate", "discrepancy", "reproduce")
+
+
+def _help(command: str, capsys) -> str:
+    """The help text on one line (no line wrapping, which would split HALF-WIDTH)."""
+    mp = pytest.MonkeyPatch()
+    mp.setenv("COLUMNS", "100000")
+    try:
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+    finally:
+        mp.undo()
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_every_command_has_seed_quiet_and_no_progress(capsys):
+    for command in COMMANDS:
+        text = _help(command, capsys)
+        for option in ("--seed", "--quiet", "--no-progress", "--overwrite"):
+            assert option in text, (command, option)
+    assert "no effect: 'estimate' is deterministic" in _help("estimate", capsys)
+
+
+def test_camera_noise_help_states_units_and_std_or_half_width(capsys):
+    simulate = _help("simulate", capsys)
+    for option in ("--e1-noise E1_NOISE e1 noise [m]", "--e2-noise E2_NOISE e2 noise [rad]"):
+        assert option in simulate
+    assert simulate.count("HALF-WIDTH for --noise uniform, the STANDARD DEVIATION for --noise gaussian") == 2
+    assert "paper = uniform, HALF-WIDTH 1 cm and 1 deg" in simulate
+    estimate = _help("estimate", capsys)
+    assert "camera noise STANDARD DEVIATION (not a half-width), e1 [m] and e2 [rad]" in estimate
+    assert "h/sqrt(3)" in estimate
+    reproduce = _help("reproduce", capsys)
+    assert "paper = uniform, HALF-WIDTH 1 cm and 1 deg (STANDARD DEVIATION 0.577 cm, 0.577 deg" in reproduce
+
+
+def test_quiet_silences_stdout_but_never_errors(tmp_path, capsys):
+    log = tmp_path / "a.csv"
+    assert main(["simulate", "--duration", "1", "--out", str(log), "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == "" and log.read_text().startswith("t,")
+    assert main(["simulate", "--duration", "1", "--out", str(log)]) == 2  # exists, no --overwrite
+    assert main(["simulate", "--duration", "1", "--out", str(log), "--quiet"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("error:") == 2
+    assert main(["simulate", "--duration", "1", "--out", str(tmp_path / "b.csv")]) == 0
+    assert "wrote" in capsys.readouterr().out  # without --quiet the line is there
+
+
+def test_seed_is_accepted_everywhere_and_seeds_numpy(tmp_path, capsys):
+    import numpy as np
+
+    from tire_learning_env.cli import build_parser
+
+    parser = build_parser()
+    for argv in (["simulate", "--out", "x.csv"], ["estimate", "x.csv", "--out", "o"],
+                 ["discrepancy", "x.csv", "--out", "o"], ["reproduce", "--study", "1", "--out", "o"]):
+        assert parser.parse_args(argv + ["--seed", "7"]).seed == 7
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    for path in (a, b):
+        assert main(["simulate", "--duration", "2", "--noise", "paper", "--seed", "5", "--out", str(path), "-q"]) == 0
+        draw = np.random.random()
+    assert a.read_text() == b.read_text()
+    np.random.seed(5)
+    assert draw == np.random.random()
+
+
+def test_reproduce_all_refuses_options_it_would_ignore(tmp_path, capsys, monkeypatch):
+    started = []
+    monkeypatch.setattr("tire_learning_env.report.reproduce_all", lambda *a, **k: started.append(1))
+    assert main(["reproduce", "--all", "--seed", "3", "--out", str(tmp_path / "r")]) == 2
+    assert "--seed apply with --study N only" in capsys.readouterr().err and not started
+
+
+# --- issue 17 item 3: the vehicle used and its source in every report --------------------------------
+
+
+def test_reproduce_metrics_name_the_vehicle_and_its_source():
+    from tire_learning_env.studies import _describe, study_spec
+
+    for study in (1, 2, 3):
+        described = _describe(study_spec(study, 1.0))
+        assert described["nominal_vehicle"]["Cf"] > 0 and described["true_vehicle"]["m"] > 0
+        assert f"study {study}" in described["vehicle_source"]
+
+
+VEHICLE = {"m": 1500.0, "Iz": 2900.0, "lf": 1.2, "lr": 1.6, "Cf": 80000.0, "Cr": 90000.0}
+
+
+@pytest.fixture(scope="module")
+def short_log(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("vehicle_source")
+    log = folder / "lc.csv"
+    assert main(["simulate", "--road", "lane_changes", "--duration", "20", "--camera-rate", "20", "--noise", "paper",
+                 "--out", str(log), "-q"]) == 0
+    return log
+
+
+def test_estimate_metrics_name_the_vehicle_and_its_source(tmp_path, short_log):
+    vehicle = tmp_path / "v.json"
+    vehicle.write_text(json.dumps(VEHICLE))
+    out = tmp_path / "cam"
+    assert main(["estimate", str(short_log), "--out", str(out), "--vehicle", str(vehicle), "-q"]) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["calibration"]["vehicle_source"] == str(vehicle) and m["calibration"]["vehicle"]["m"] == 1500.0
+
+
+def test_estimate_on_an_imu_log_names_the_vehicle_and_its_source(tmp_path, short_log):
+    import csv
+
+    rows = list(csv.DictReader(short_log.open()))
+    keep = [c for c in rows[0] if c not in ("e1", "e2", "kappa")]
+    imu = tmp_path / "imu.csv"
+    with imu.open("w", newline="") as f:
+        w = csv.DictWriter(f, keep, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    assert "yaw_rate" in keep and "ay" in keep
+    for args, source in (([], "built-in default"), (["--vehicle", "VEH"], "VEH")):
+        vehicle = tmp_path / "v.json"
+        vehicle.write_text(json.dumps(VEHICLE))
+        args = [str(vehicle) if a == "VEH" else a for a in args]
+        out = tmp_path / f"imu_out{len(args)}"
+        assert main(["estimate", str(imu), "--out", str(out), "-q"] + args) == 0
+        m = json.loads((out / "metrics.json").read_text())
+        assert m["log_kind"] == "imu" and "m" in m["vehicle"]
+        assert m["vehicle_source"].startswith(str(vehicle) if args else source)
+
+
+def test_discrepancy_report_names_the_vehicle_and_its_source(tmp_path, short_log):
+    out = tmp_path / "disc"
+    assert main(["discrepancy", str(short_log), "--out", str(out), "--tire", "linear", "--no-progress", "-q"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["nominal_model"]["vehicle"]["m"] > 0
+    assert report["nominal_model"]["vehicle_source"].startswith("built-in default")
+    assert "built-in default" in (out / "report.md").read_text()

@@ -12,6 +12,11 @@ What this file adds to every subcommand, centrally:
   holding an input, the current directory and its parents are never silently replaced.
 - ``--no-unit-checks`` where there is a ``log`` input (the plausibility checks of
   :func:`tire_learning_env.io.read_log`), ``--no-progress`` everywhere.
+- ``--seed`` everywhere: a subcommand with randomness defines its own (and passes it on);
+  elsewhere it is accepted and documented as having no effect. Either way ``main`` seeds
+  numpy's global generator with it.
+- ``--quiet`` everywhere: the command's normal stdout lines are suppressed (stdout goes to
+  :data:`os.devnull` while it runs); warnings and errors on stderr are never suppressed.
 - Defaults shown in ``--help``.
 - Errors as one line on stderr with exit code 2; Ctrl-C as one line with exit code 130.
   ``TIRE_LEARNING_DEBUG=1`` shows the traceback of an unexpected error.
@@ -75,6 +80,12 @@ def _add_common_options(name: str, parser: argparse.ArgumentParser) -> None:
                             "time in ms, ...) when you are sure the units are SI")
     if "--no-progress" not in options:
         parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    if "--seed" not in options:
+        parser.add_argument("--seed", type=int, default=None,
+                            help=f"random seed; no effect: '{name}' is deterministic (accepted for a uniform CLI)")
+    if "--quiet" not in options:
+        parser.add_argument("--quiet", "-q", action="store_true",
+                            help="print nothing on stdout (warnings and errors still go to stderr)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -153,6 +164,24 @@ def _progress_disabled(disabled: bool) -> Iterator[None]:
         tqdm.__init__ = original
 
 
+@contextlib.contextmanager
+def _stdout_quiet(quiet: bool) -> Iterator[None]:
+    """With ``quiet``, everything printed on stdout in the body goes to :data:`os.devnull`."""
+    if not quiet:
+        yield
+        return
+    with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink):
+        yield
+
+
+def _seed_global_rng(seed: int | None) -> None:
+    """Seed numpy's global generator (code that draws from it is then reproducible)."""
+    if seed is not None:
+        import numpy as np
+
+        np.random.seed(seed % 2**32)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -164,8 +193,10 @@ def main(argv: list[str] | None = None) -> int:
                         check_units=not getattr(args, "no_unit_checks", False)),
             _warnings_as_lines(args.command),
             _progress_disabled(bool(getattr(args, "no_progress", False))),
+            _stdout_quiet(bool(getattr(args, "quiet", False))),
         ):
             check_output(args)
+            _seed_global_rng(getattr(args, "seed", None))
             return int(args.func(args) or 0)
     except (LogFormatError, ParameterError, OutputPathError, FileExistsError) as exc:
         print(f"{prefix}: error: {exc}", file=sys.stderr)

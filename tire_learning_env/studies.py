@@ -295,6 +295,7 @@ def _describe(spec: StudySpec) -> dict:
         "observer": spec.config.to_dict(),
         "true_vehicle": spec.true_vehicle.to_dict(),
         "nominal_vehicle": spec.nominal_vehicle.to_dict(),
+        "vehicle_source": f"built-in: study {spec.study}'s vehicles (studies.study_spec; no vehicle file)",
         "notes": list(spec.notes),
         "version": __version__,
     }

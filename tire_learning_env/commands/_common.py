@@ -10,6 +10,9 @@ from ..io import read_vehicle, record_run_info
 from ..params import ParameterError, VehicleParams
 
 
+DEFAULT_VEHICLE_SOURCE = "built-in default (the paper's D-class sedan)"
+
+
 def add_vehicle_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--vehicle",
@@ -22,7 +25,7 @@ def add_vehicle_argument(parser: argparse.ArgumentParser) -> None:
 def vehicle_from_args(args: argparse.Namespace) -> VehicleParams:
     """The vehicle of ``--vehicle`` (or the default sedan), recorded in the output manifest."""
     vehicle = read_vehicle(args.vehicle)
-    source = str(args.vehicle) if args.vehicle is not None else "default: the paper's D-class sedan"
+    source = str(args.vehicle) if args.vehicle is not None else DEFAULT_VEHICLE_SOURCE
     record_run_info("vehicle", {"source": source, "parameters": vehicle.to_dict()})
     return vehicle
 

@@ -39,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "curvature feed-forward, like the simulator's driver; IMU-only logs have no curvature and use "
                    "linear), linear (a continuous signal, e.g. a human driver), hold")
     p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo null distributions")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
 

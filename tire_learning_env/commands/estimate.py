@@ -41,8 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sensors", choices=["auto", "camera", "imu", "both"], default="auto",
                    help="measurement model; auto = the camera when the log has one, else the IMU")  # fmt: skip
     p.add_argument("--camera-noise", type=float, nargs=2, metavar=("E1_STD", "E2_STD"), default=None,
-                   help="camera noise STANDARD DEVIATION, e1 [m] and e2 [rad] (a uniform +/-h noise has std "
-                        "h/sqrt(3)); default: estimated from the log")  # fmt: skip
+                   help="camera noise STANDARD DEVIATION (not a half-width), e1 [m] and e2 [rad]; a uniform "
+                        "+/-h noise (HALF-WIDTH h, as simulate --noise uniform/paper) has std h/sqrt(3), e.g. "
+                        "simulate --noise paper = 0.00577 0.01008; default: estimated from the log")  # fmt: skip
     p.add_argument("--imu-noise", type=float, nargs=2, metavar=("AY_STD", "R_STD"), default=None,
                    help="IMU noise standard deviation, a_y [m/s^2] and yaw rate [rad/s]; default: estimated from the log")
     p.add_argument("--latency", type=float, default=None, metavar="S",

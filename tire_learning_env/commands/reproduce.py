@@ -26,10 +26,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--baseline", choices=["ukf"], default=None, help="also score the joint UKF baseline")
     p.add_argument("--camera-rate", type=positive_float, default=None, help="camera frame rate [Hz] (default: the study's)")
     p.add_argument("--noise", choices=["paper", "none"], default=None,
-                   help="camera noise: paper = uniform +/-1 cm, +/-1 deg (default: the study's)")
+                   help="camera noise on e1, e2: paper = uniform, HALF-WIDTH 1 cm and 1 deg (STANDARD DEVIATION "
+                   "0.577 cm, 0.577 deg; the same as simulate --noise paper); none = no noise (default: the study's)")
     p.add_argument("--basis", choices=["two_sided", "paper"], default=None, help="activation basis preset")
     p.add_argument("--duration", type=positive_float, default=None, help="simulated time [s] (default 60)")
-    p.add_argument("--seed", type=int, default=None, help="noise seed")
+    p.add_argument("--seed", type=int, default=None, help="seed of the simulated camera noise (default: the study's)")
     p.set_defaults(func=run)
 
 
@@ -54,7 +55,13 @@ def run(args: argparse.Namespace) -> int:
     if args.all:
         from ..report import reproduce_all
 
-        reproduce_all(args.out, baseline=args.baseline)
+        ignored = [f"--{k.replace('_', '-')}" for k in ("camera_rate", "noise", "basis", "seed")
+                   if getattr(args, k) is not None]
+        if ignored:
+            from ..params import ParameterError
+
+            raise ParameterError(f"--all runs every study as published; {', '.join(ignored)} apply with --study N only")
+        reproduce_all(args.out, baseline=args.baseline, duration=args.duration)
         print(f"wrote every study and {args.out / 'index.md'}")
         return 0
     spec = _spec(args.study, args)

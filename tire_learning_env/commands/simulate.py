@@ -32,9 +32,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--log-rate", type=positive_float, default=100.0, help="rate of the written rows [Hz] (frames are kept)")
     p.add_argument("--camera-rate", type=positive_float, default=100.0, help="camera frame rate [Hz]")
     p.add_argument("--noise", choices=["none", "paper", "uniform", "gaussian"], default="none",
-                   help="camera noise: paper = uniform +/-1 cm, +/-1 deg")
-    p.add_argument("--e1-noise", type=non_negative_float, default=0.01, help="e1 noise half-width/std [m]")
-    p.add_argument("--e2-noise", type=non_negative_float, default=math.radians(0.1), help="e2 noise half-width/std [rad]")
+                   help="camera noise on e1, e2: none; paper = uniform, HALF-WIDTH 1 cm and 1 deg (std = "
+                   "half-width/sqrt(3): 0.577 cm, 0.577 deg; --e1-noise/--e2-noise are ignored); uniform = "
+                   "+/-HALF-WIDTH given by --e1-noise/--e2-noise; gaussian = STANDARD DEVIATION given by "
+                   "--e1-noise/--e2-noise. (estimate --camera-noise takes STANDARD DEVIATIONS)")
+    p.add_argument("--e1-noise", type=non_negative_float, default=0.01,
+                   help="e1 noise [m]: the HALF-WIDTH for --noise uniform, the STANDARD DEVIATION for --noise gaussian")
+    p.add_argument("--e2-noise", type=non_negative_float, default=math.radians(0.1),
+                   help="e2 noise [rad]: the HALF-WIDTH for --noise uniform, the STANDARD DEVIATION for --noise gaussian "
+                   "(default 0.1 deg = 0.001745 rad)")
     p.add_argument("--effect", action="append", metavar="NAME=VALUE",
                    help="hidden physical effect in the truth model (repeatable): "
                    + "; ".join(f"{k} [{v[2]}]" for k, v in HIDDEN_EFFECTS.items())
@@ -42,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    + ") and camera_latency / e1_bias / e2_bias also work")
     p.add_argument("--speed-profile", choices=sorted(SPEED_PROFILES), default="constant",
                    help="speed over time (v0 = the vehicle's vx): " + "; ".join(f"{k}: {v}" for k, v in SPEED_PROFILES.items()))
-    p.add_argument("--seed", type=int, default=0, help="noise seed")
+    p.add_argument("--seed", type=int, default=0, help="seed of the camera noise (and of numpy's global generator)")
     p.add_argument("--no-truth", action="store_true", help="omit the true_* columns")
     p.add_argument("--out", "--log", dest="out", type=Path, required=True,
                    help="output log: one CSV FILE (not a folder, unlike the other commands' --out). An existing "

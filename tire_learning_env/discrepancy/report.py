@@ -69,7 +69,8 @@ def render_markdown(result: DiscrepancyResult, doc: dict) -> str:
     tire = doc["nominal_model"]["tire"]
     lines += [
         f"Nominal model: bicycle model + {tire['kind']} tire; vehicle m = {result.vehicle.m:g} kg, "
-        f"Cf = {result.vehicle.Cf:g} N/rad, Cr = {result.vehicle.Cr:g} N/rad per tire.",
+        f"Cf = {result.vehicle.Cf:g} N/rad, Cr = {result.vehicle.Cr:g} N/rad per tire "
+        f"(vehicle: {doc['nominal_model'].get('vehicle_source', 'not recorded')}).",
         f"Log: {doc['log']['rows']} rows, {doc['log']['duration_s']:.1f} s, channels {', '.join(doc['comparison']['channels'])}. "
         f"Analysis took {result.runtime_s:.1f} s.",
         "",

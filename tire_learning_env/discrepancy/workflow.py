@@ -242,7 +242,8 @@ class DiscrepancyResult:
                     "ax_input": "slope of vx (0.1 s centred moving average) + slow part (1 s) of logged ax - slope"}
                    if d.kind == "imu" else {}),
             },
-            "nominal_model": {"vehicle": self.vehicle.to_dict(), "tire": self.tire},
+            "nominal_model": {"vehicle": self.vehicle.to_dict(), "vehicle_source": _vehicle_source(),
+                              "tire": self.tire},
             "log": {
                 **({"kind": "imu"} if d.kind == "imu" else {}),
                 "source": self.source,
@@ -549,3 +550,12 @@ def _evidence(sel: SelectionResult, effect: CandidateEffect, n: int, config: Dis
                 }
             return out
     return {}
+
+
+def _vehicle_source() -> str:
+    """Where the nominal vehicle came from: the CLI's ``--vehicle`` path or its built-in default
+    (recorded by ``vehicle_from_args``), else a caller of the library."""
+    from ..io import current_run_context
+
+    info = current_run_context().info.get("vehicle")
+    return str(info["source"]) if isinstance(info, dict) and "source" in info else "given by the caller (VehicleParams)"

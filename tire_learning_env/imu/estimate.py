@@ -353,6 +353,15 @@ def _calibration(result: ImuEstimate) -> dict:
     return cal
 
 
+def _vehicle_source() -> str:
+    """Where the vehicle came from: the CLI's ``--vehicle`` path or its built-in default (recorded by
+    ``vehicle_from_args``), else a caller of the library."""
+    from ..io import current_run_context
+
+    info = current_run_context().info.get("vehicle")
+    return str(info["source"]) if isinstance(info, dict) and "source" in info else "given by the caller (VehicleParams)"
+
+
 def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: ObserverConfig, result: ImuEstimate,
              wall: float) -> dict:  # fmt: skip
     from .scoring import MeasuredCurve, measured_tire_data, near_zero_stiffness, reference_beta, sideslip_rmse_deg, split_masks
@@ -370,6 +379,7 @@ def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: Obser
         "log_notes": cleaned.notes,
         "cleaning": report.to_dict(),
         "vehicle": vehicle.to_dict(),
+        "vehicle_source": _vehicle_source(),
         "config": config.to_dict(),
         "summary": core.summary(),
         "calibration": _calibration(result),
