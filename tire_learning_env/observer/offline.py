@@ -209,8 +209,15 @@ def calibrate_force_error(observer: NeuroAdaptiveObserver, sensors: dict, w: NDA
     return fe, {"force_error_N": fe, "grid_N": grid.tolist(), "nis_per_dof": nis.tolist()}
 
 
-def _gauss_newton(observer, sensors, w, w0, Lam, lo, hi, fit_from, gate, max_iter, tol):
-    """Levenberg-Marquardt-damped Gauss-Newton passes at the current process noise."""
+def _gauss_newton(observer, sensors, w, w0, Lam, lo, hi, fit_from, gate, max_iter, tol, min_decrease=0.0):
+    """Levenberg-Marquardt-damped Gauss-Newton passes at the current process noise.
+
+    Stops after ``max_iter`` steps, when a step's largest change is below ``tol`` times the
+    weight range, or (without the pass) when the next step's predicted cost decrease, in the
+    cost's chi-square units (the squared length of the step in posterior standard deviations),
+    is below ``min_decrease``: every linear functional of the weights would then move by less
+    than ``sqrt(min_decrease)`` of its standard deviation.
+    """
     mu = 1e-3
     acc, _ = _pass(observer, sensors, w, fit_from, gate)
     cost = float(acc.stats[0] + (w - w0) @ Lam @ (w - w0))
@@ -220,6 +227,11 @@ def _gauss_newton(observer, sensors, w, w0, Lam, lo, hi, fit_from, gate, max_ite
     for it in range(1, max_iter + 1):
         A = acc.hess + Lam
         rhs = acc.grad - Lam @ (w - w0)
+        if min_decrease > 0:
+            dw = _solve_step(A, rhs, w, lo, hi)
+            if 2.0 * float(rhs @ dw) - float(dw @ A @ dw) < min_decrease:
+                it -= 1
+                break
         while True:
             dw = _solve_step(A + mu * np.diag(np.diag(A)), rhs, w, lo, hi)
             w_new = w + dw
@@ -237,6 +249,21 @@ def _gauss_newton(observer, sensors, w, w0, Lam, lo, hi, fit_from, gate, max_ite
     return w, acc, costs, it
 
 
+def _continuation_rows(sensors: dict, max_s: float) -> dict:
+    """The ``max_s`` window of the log with the most steering activity (the whole log if
+    shorter): the rows the intermediate process-noise stages are fitted on."""
+    t = np.asarray(sensors["t"], dtype=float)
+    if t[-1] - t[0] <= 1.25 * max_s or "delta" not in sensors:
+        return sensors
+    dt = float(np.median(np.diff(t)))
+    n = max(int(max_s / dt), 10)
+    d = np.nan_to_num(np.diff(np.asarray(sensors["delta"], dtype=float), prepend=sensors["delta"][0])) ** 2
+    c = np.cumsum(d)
+    act = c[n:] - c[:-n]
+    s0 = int(np.argmax(act)) if len(act) else 0
+    return {k: np.asarray(v)[s0 : s0 + n] for k, v in sensors.items()}
+
+
 def refine(
     observer: NeuroAdaptiveObserver,
     sensors: dict,
@@ -248,6 +275,9 @@ def refine(
     gate: float = 25.0,
     force_errors: tuple[float, ...] = (3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4),
     nis_limit: float = 1.3,
+    continuation_iter: int = 2,
+    continuation_s: float = 300.0,
+    min_decrease: float = 1e-2,
 ) -> OfflineFit:
     """Prediction-error refinement of the weights over the whole log (module docstring).
 
@@ -280,6 +310,20 @@ def refine(
         Process-noise stages, as fractions of the mean static axle load.
     nis_limit : float
         Largest mean NIS per degree of freedom accepted as consistent.
+    continuation_iter : int
+        Gauss-Newton passes per intermediate stage at most. The intermediate stages only
+        carry the weights from the forgiving start to the last stage, so they are fitted
+        cheaply: on the ``continuation_s`` window of the log with the most steering
+        activity (the whole log if shorter) and with a few passes; the stage they reach is
+        then fitted on the whole log with ``max_iter`` passes, and its consistency checked
+        there (the stage below or above is fitted on the whole log too when the whole log's
+        NIS disagrees with the window's), so the chosen stage is the whole log's.
+    continuation_s : float
+        Length of that window [s].
+    min_decrease : float
+        A stage also stops when the next step's predicted cost decrease (chi-square units:
+        the step's squared length in posterior standard deviations) is below this; the
+        intermediate stages use 100 times this.
     """
     nw = observer.n_weights
     lo, hi = observer._weight_box()
@@ -291,23 +335,53 @@ def refine(
     fit_from = float(t[0]) + observer.settle_s
     load = 0.5 * observer.vehicle.m * 9.81
     w = np.clip(np.asarray(w_start, dtype=float), lo, hi)
-    stages = []
-    chosen = None
+    stages: list = []
     all_costs: list = []
     iters = 0
-    for frac in force_errors:
+    n_st = len(force_errors)
+    sub = _continuation_rows(sensors, continuation_s)
+    sub_from = float(np.asarray(sub["t"])[0]) + observer.settle_s
+
+    def fit_stage(i, w_from, rows, start, n_iter, dec, phase):
+        nonlocal iters, all_costs
+        frac = force_errors[i]
         observer.set_force_error(frac * load)
-        w_fit, acc, costs, it = _gauss_newton(observer, sensors, w, w0, Lam, lo, hi, fit_from, gate, max_iter, tol)
+        w_fit, acc, costs, it = _gauss_newton(observer, rows, w_from, w0, Lam, lo, hi, start, gate, n_iter, tol, dec)
         iters += it
         all_costs += costs
         nis = _nis_per_dof(acc)
-        stages.append({"force_error_N": frac * load, "nis_per_dof": nis, "iterations": it})
-        if nis > nis_limit and chosen is not None:
-            break  # the model error is larger than this stage's process noise: keep the previous stage
-        chosen = (frac * load, w_fit.copy(), nis)
-        w = w_fit
-        if nis > nis_limit:  # inconsistent even at the largest process noise: keep it, the sandwich covers it
+        stages.append({"force_error_N": frac * load, "nis_per_dof": nis, "iterations": it, "fit": phase})
+        return w_fit, nis
+
+    # continuation: the intermediate stages, cheaply (window, few passes)
+    cheap_w: list = []
+    j = n_st - 1  # the stage to fit on the whole log
+    for i in range(n_st - 1):
+        w_fit, nis = fit_stage(i, w, sub, sub_from, continuation_iter, 100.0 * min_decrease, "continuation")
+        if nis > nis_limit and i > 0:
+            j = i - 1  # the model error is larger than this stage's process noise
             break
+        cheap_w.append(w_fit)
+        w = w_fit
+        if nis > nis_limit:  # inconsistent even at the largest process noise
+            j = 0
+            break
+    # the stage reached, on the whole log; its neighbours too when the whole log disagrees
+    w_j, nis = fit_stage(j, w, sensors, fit_from, max_iter, min_decrease, "whole log")
+    if nis > nis_limit:
+        while nis > nis_limit and j > 0:  # the stage below (from its continuation weights)
+            j -= 1
+            w_j, nis = fit_stage(j, cheap_w[j], sensors, fit_from, max_iter, min_decrease, "whole log")
+        chosen = (force_errors[j] * load, w_j.copy(), nis)
+    else:
+        chosen = (force_errors[j] * load, w_j.copy(), nis)
+        while j + 1 < n_st and not any(s["fit"] == "whole log" and s["force_error_N"] == force_errors[j + 1] * load for s in stages):
+            w_up, nis_up = fit_stage(j + 1, w_j, sensors, fit_from, max_iter, min_decrease, "whole log")
+            if nis_up > nis_limit:
+                break
+            j += 1
+            w_j = w_up
+            chosen = (force_errors[j] * load, w_j.copy(), nis_up)
     fe, w, nis = chosen
     observer.set_force_error(fe)
     acc, trace = _pass(observer, sensors, w, fit_from, gate, final=True)
