@@ -2,9 +2,11 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from tire_learning_env.cli import main
+from tire_learning_env.params import ParameterError
 
 
 def test_simulate_then_estimate_a_camera_log(tmp_path, capsys):
@@ -186,3 +188,24 @@ def test_discrepancy_report_names_the_vehicle_and_its_source(tmp_path, short_log
     assert report["nominal_model"]["vehicle"]["m"] > 0
     assert report["nominal_model"]["vehicle_source"].startswith("built-in default")
     assert "built-in default" in (out / "report.md").read_text()
+
+
+def test_one_noise_grammar_on_every_command(tmp_path, capsys):
+    """simulate, reproduce and estimate take the same --noise KIND --e1-noise --e2-noise (issue 17)."""
+    for command in ("simulate", "reproduce", "estimate"):
+        text = _help(command, capsys)
+        assert "--noise {" in text and "--e1-noise E1_NOISE e1 noise [m]" in text and "--e2-noise E2_NOISE e2 noise [rad]" in text
+    from tire_learning_env.commands.estimate import config_from_args
+    from tire_learning_env.cli import build_parser
+
+    parser = build_parser()
+    args = parser.parse_args(["estimate", "x.csv", "--out", str(tmp_path / "o"), "--noise", "uniform",
+                              "--e1-noise", "0.02", "--e2-noise", "0.01"])  # fmt: skip
+    cfg = config_from_args(args, "camera")
+    np.testing.assert_allclose(cfg.camera_noise, (0.02 / 3**0.5, 0.01 / 3**0.5))  # half-widths -> std
+    args = parser.parse_args(["estimate", "x.csv", "--out", str(tmp_path / "o")])
+    assert config_from_args(args, "camera").camera_noise is None  # default: measured from the log
+    args = parser.parse_args(["estimate", "x.csv", "--out", str(tmp_path / "o"), "--noise", "paper",
+                              "--camera-noise", "0.01", "0.01"])  # fmt: skip
+    with pytest.raises(ParameterError, match="not both"):
+        config_from_args(args, "camera")

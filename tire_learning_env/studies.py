@@ -74,15 +74,17 @@ class StudySpec:
     seed: int = 0
     notes: tuple[str, ...] = field(default_factory=tuple)
 
-    def with_camera(self, rate: float | None = None, noise: str | None = None) -> "StudySpec":
-        """Variant with another camera rate and/or noise (``"paper"`` or ``"none"``).
+    def with_camera(self, rate: float | None = None, noise: "str | CameraParams | None" = None) -> "StudySpec":
+        """Variant with another camera rate and/or noise (``"paper"``, ``"none"`` or a camera).
 
         The observer settings follow the camera (:meth:`ObserverConfig.for_camera`), with
         the study's knowledge of the stiffness.
         """
         cam = self.camera
         rate = cam.rate if rate is None else rate
-        if noise == "paper":
+        if isinstance(noise, CameraParams):
+            cam = noise.replace(rate=rate)
+        elif noise == "paper":
             cam = CameraParams.paper_noise(rate=rate)
         elif noise == "none":
             cam = CameraParams(rate=rate)

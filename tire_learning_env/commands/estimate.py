@@ -17,7 +17,7 @@ import numpy as np
 
 from ..io import DrivingLog, atomic_directory, atomic_write_json, read_log, write_table
 from ..params import ParameterError
-from ._common import add_vehicle_argument, vehicle_from_args
+from ._common import add_noise_arguments, add_vehicle_argument, camera_from_noise_args, vehicle_from_args
 
 CAMERA_COLUMNS = ("e1", "e2", "kappa")
 IMU_COLUMNS = ("ay", "yaw_rate")
@@ -44,6 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="camera noise STANDARD DEVIATION (not a half-width), e1 [m] and e2 [rad]; a uniform "
                         "+/-h noise (HALF-WIDTH h, as simulate --noise uniform/paper) has std h/sqrt(3), e.g. "
                         "simulate --noise paper = 0.00577 0.01008; default: estimated from the log")  # fmt: skip
+    add_noise_arguments(p, default="estimated", extra_kinds=("estimated",),
+                        extra_help="; estimated = measured from the log (the default). The same grammar as simulate; "
+                        "or give STANDARD DEVIATIONS directly with --camera-noise")  # fmt: skip
     p.add_argument("--imu-noise", type=float, nargs=2, metavar=("AY_STD", "R_STD"), default=None,
                    help="IMU noise standard deviation, a_y [m/s^2] and yaw rate [rad/s]; default: estimated from the log")
     p.add_argument("--latency", type=float, default=None, metavar="S",
@@ -99,8 +102,14 @@ def config_from_args(args: argparse.Namespace, sensors: str):
 
     if args.latency is not None and not (math.isfinite(args.latency) and args.latency >= 0):
         raise ParameterError(f"--latency must be a finite number of seconds >= 0, got {args.latency}")
+    camera_noise = args.camera_noise
+    if args.noise != "estimated":
+        if camera_noise is not None:
+            raise ParameterError("give the camera noise either as --noise KIND [--e1-noise --e2-noise] or as "
+                                 "--camera-noise E1_STD E2_STD, not both")  # fmt: skip
+        camera_noise = tuple(camera_from_noise_args(args, 20.0).noise_std)
     return ObserverConfig(
-        sensors=sensors, basis=args.basis, camera_noise=args.camera_noise, imu_noise=args.imu_noise,
+        sensors=sensors, basis=args.basis, camera_noise=camera_noise, imu_noise=args.imu_noise,
         latency=args.latency, stiffness_known=args.stiffness_known, offline=not args.no_offline,
     )  # fmt: skip
 
@@ -109,7 +118,8 @@ def run(args: argparse.Namespace) -> int:
     log = read_log(args.log)
     vehicle = vehicle_from_args(args)
     sensors, why = choose_sensors(log, args.sensors)
-    print(f"sensors: {sensors} ({why})", file=sys.stderr)
+    if not getattr(args, "quiet", False):
+        print(f"sensors: {sensors} ({why})", file=sys.stderr)
     config = config_from_args(args, sensors)
     if sensors == "imu":
         from ..imu import estimate_imu_log

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from ._common import positive_float
+from ._common import add_noise_arguments, camera_from_noise_args, positive_float
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -25,9 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder (see --overwrite)")
     p.add_argument("--baseline", choices=["ukf"], default=None, help="also score the joint UKF baseline")
     p.add_argument("--camera-rate", type=positive_float, default=None, help="camera frame rate [Hz] (default: the study's)")
-    p.add_argument("--noise", choices=["paper", "none"], default=None,
-                   help="camera noise on e1, e2: paper = uniform, HALF-WIDTH 1 cm and 1 deg (STANDARD DEVIATION "
-                   "0.577 cm, 0.577 deg; the same as simulate --noise paper); none = no noise (default: the study's)")
+    add_noise_arguments(p, default=None, extra_help=" (default: the study's camera; the same grammar as simulate)")
     p.add_argument("--basis", choices=["two_sided", "paper"], default=None, help="activation basis preset")
     p.add_argument("--duration", type=positive_float, default=None, help="simulated time [s] (default 60)")
     p.add_argument("--seed", type=int, default=None, help="seed of the simulated camera noise (default: the study's)")
@@ -40,7 +38,9 @@ def _spec(study: int, args: argparse.Namespace):
     from ..studies import study_spec
 
     spec = study_spec(study, args.duration)
-    if args.camera_rate is not None or args.noise is not None:
+    if args.noise in ("uniform", "gaussian"):
+        spec = spec.with_camera(args.camera_rate, camera_from_noise_args(args, args.camera_rate or spec.camera.rate))
+    elif args.camera_rate is not None or args.noise is not None:
         spec = spec.with_camera(args.camera_rate, args.noise)
     if args.basis is not None:
         spec = replace(spec, config=spec.config.replace(basis=args.basis))

@@ -3,17 +3,17 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 from ..discrepancy.truth import DISCREPANCY_ROADS, HIDDEN_EFFECTS, SPEED_PROFILES, parse_hidden_effects, speed_profile
 from ..dynamics import PlantEffects
 from ..io import write_log
-from ..params import CameraParams, ParameterError, TireParams
+from ..params import ParameterError, TireParams
 from ..roads import BUILTIN_ROADS
 from ..simulation import simulate
 from ..tires import axle_tires
-from ._common import add_vehicle_argument, non_negative_float, parse_assignments, positive_float, vehicle_from_args
+from ._common import (add_noise_arguments, add_vehicle_argument, camera_from_noise_args, parse_assignments, positive_float,
+                      vehicle_from_args)
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -31,16 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--physics-rate", type=positive_float, default=1000.0, help="integration rate [Hz]")
     p.add_argument("--log-rate", type=positive_float, default=100.0, help="rate of the written rows [Hz] (frames are kept)")
     p.add_argument("--camera-rate", type=positive_float, default=100.0, help="camera frame rate [Hz]")
-    p.add_argument("--noise", choices=["none", "paper", "uniform", "gaussian"], default="none",
-                   help="camera noise on e1, e2: none; paper = uniform, HALF-WIDTH 1 cm and 1 deg (std = "
-                   "half-width/sqrt(3): 0.577 cm, 0.577 deg; --e1-noise/--e2-noise are ignored); uniform = "
-                   "+/-HALF-WIDTH given by --e1-noise/--e2-noise; gaussian = STANDARD DEVIATION given by "
-                   "--e1-noise/--e2-noise. (estimate --camera-noise takes STANDARD DEVIATIONS)")
-    p.add_argument("--e1-noise", type=non_negative_float, default=0.01,
-                   help="e1 noise [m]: the HALF-WIDTH for --noise uniform, the STANDARD DEVIATION for --noise gaussian")
-    p.add_argument("--e2-noise", type=non_negative_float, default=math.radians(0.1),
-                   help="e2 noise [rad]: the HALF-WIDTH for --noise uniform, the STANDARD DEVIATION for --noise gaussian "
-                   "(default 0.1 deg = 0.001745 rad)")
+    add_noise_arguments(p, default="none", extra_help=". (estimate --camera-noise takes STANDARD DEVIATIONS)")
     p.add_argument("--effect", action="append", metavar="NAME=VALUE",
                    help="hidden physical effect in the truth model (repeatable): "
                    + "; ".join(f"{k} [{v[2]}]" for k, v in HIDDEN_EFFECTS.items())
@@ -61,13 +52,7 @@ def run(args: argparse.Namespace) -> int:
     vehicle = vehicle_from_args(args)
     hidden = parse_hidden_effects(parse_assignments(args.effect, "--effect"))
     camera_kwargs = dict(hidden.camera)
-    if args.noise == "paper":
-        camera = CameraParams.paper_noise(rate=args.camera_rate, **camera_kwargs)
-    elif args.noise == "none":
-        camera = CameraParams(rate=args.camera_rate, **camera_kwargs)
-    else:
-        camera = CameraParams(rate=args.camera_rate, noise=args.noise, e1_noise=args.e1_noise,
-                              e2_noise=args.e2_noise, **camera_kwargs)
+    camera = camera_from_noise_args(args, args.camera_rate, **camera_kwargs)
     if not args.log_rate > 0 or args.log_rate > args.physics_rate:
         raise ParameterError("--log-rate must be > 0 and at most --physics-rate")
     road = DISCREPANCY_ROADS[args.road]() if args.road in DISCREPANCY_ROADS else args.road
