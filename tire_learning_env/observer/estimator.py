@@ -165,10 +165,11 @@ class ObserverConfig(_Params):
 #: why ``auto`` does not fuse a log's IMU columns with its camera
 FUSION_NOTE = (
     "camera + IMU fusion is available (sensors='both') but not the default: it is only as good as the "
-    "agreement of the two sensors' conventions, which a log's columns cannot prove. Measured on simulated "
-    "lane changes (40-60 s, 20 Hz camera with the paper's noise): with a noisy IMU (0.1 m/s^2, 0.002 rad/s) "
-    "fusion gives stiffness -0.17/-0.00 % (camera alone -0.29/+0.06 %) and the curve within 0.3 % (camera "
-    "alone -6.6 % at 0.1 deg); with a noise-free IMU +0.28/+0.60 % (camera alone +0.02/+0.30 %)"
+    "agreement of the two sensors' conventions, which a log's columns cannot prove, and it is not better "
+    "everywhere: on benchmarks/bench_fusion.py it beats the camera alone (stiffness +0.02/-0.00 % and "
+    "-0.17/+0.00 % against -0.13/+0.23 %) and ties the IMU alone, but on the log of `tire-learning simulate "
+    "--road lane_changes --camera-rate 20 --noise paper --out LOG` it is worse than the camera alone "
+    "(+0.28/+0.60 % against +0.02/+0.30 %)"
 )
 
 
