@@ -43,6 +43,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from ..observer._kernel import V_FLOOR, slip_angles
+from ..observer.model import check_sensor_columns
 from ..observer.trace import EstimateTrace
 from ..params import ParameterError, VehicleParams
 
@@ -300,12 +301,7 @@ class LinearKalmanFilter:
             ``std`` of ``[vy, r]``, innovations of ``a_y`` and ``r`` (columns 2, 3), NIS;
             ``force_nonlinear`` is zero and ``weights`` empty (nothing is learned).
         """
-        leaked = [k for k in sensors if str(k).startswith("true")]
-        if leaked:
-            raise ValueError(f"the baseline must not see ground truth; got columns {leaked}")
-        missing = [k for k in ("t", "delta", "vx", "ay", "yaw_rate") if k not in sensors]
-        if missing:
-            raise ParameterError(f"the linear Kalman filter needs sensor columns {missing}")
+        check_sensor_columns(sensors, ("t", "delta", "vx", "ay", "yaw_rate"), "the linear Kalman filter")
         t, delta, vx, ay, yr = (np.ascontiguousarray(sensors[k], dtype=float) for k in ("t", "delta", "vx", "ay", "yaw_rate"))
         n = len(t)
         if not (len(delta) == len(vx) == len(ay) == len(yr) == n):

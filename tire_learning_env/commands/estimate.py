@@ -171,13 +171,13 @@ def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
     frames = np.flatnonzero(np.isfinite(log.sensors["e1"]))
     if len(frames) < 10:
         raise ParameterError(f"{log.source}: only {len(frames)} camera frames; too few to estimate anything")
-    rows = {k: v for k, v in log.sensors.items()}
-    result = estimate(rows, vehicle, None, config=config)
+    result = estimate(log.sensors, vehicle, None, config=config)
     trace = result.trace
     online = result.online
     summary = result.summary()
     calibration = {k: v for k, v in result.calibration.items() if not k.startswith("_")}
     calibration["sensors_reason"] = why
+    k_online = result.observer.cornering_stiffness(result.online_weights)
     calibration["vehicle_source"] = str(args.vehicle) if args.vehicle else "built-in default (the paper's D-class sedan)"
     metrics: dict = {
         "log": log.source,
@@ -187,7 +187,7 @@ def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
         "stiffness": result.stiffness_report(),
         "learned_slip_range_deg": result.learned_slip_range(),
         "cornering_stiffness_estimated": dict(zip(AXLES, result.cornering_stiffness())),
-        "cornering_stiffness_online": dict(zip(AXLES, result.observer.cornering_stiffness(result.online_weights))),
+        "cornering_stiffness_online": dict(zip(AXLES, k_online)),
         "excited_slip_range_deg": {
             a: [math.degrees(v) for v in excited_range(trace.slip[:, i])] for i, a in enumerate(AXLES)
         },
@@ -213,7 +213,7 @@ def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
         scores = {}
         for name, tr, curve, k_hat in (
             ("offline", trace, result.axle_force, result.cornering_stiffness()),
-            ("online", online, result.online_axle_force, result.observer.cornering_stiffness(result.online_weights)),
+            ("online", online, result.online_axle_force, k_online),
         ):
             scores[name] = compute_metrics(
                 t=tr.t, xi_hat=tr.xi, slip_hat=tr.slip, force_nonlinear_hat=tr.force_nonlinear,

@@ -44,6 +44,7 @@ from ..baselines.kalman import LinearKalmanFilter
 from ..io import DrivingLog, atomic_directory, atomic_write_json, write_table
 from ..observer import EstimateTrace, EstimationResult, ObserverConfig, estimate
 from ..observer.calibration import estimate_noise_std
+from ..observer.model import check_sensor_columns
 from ..params import ParameterError, VehicleParams
 from .blend import Blend, BlendParams, blend_traces
 from .logs import CleaningReport, clean_imu_log
@@ -169,12 +170,7 @@ class ImuEstimate:
 
 
 def _rows(sensors: Mapping[str, ArrayLike]) -> dict[str, NDArray]:
-    leaked = [k for k in sensors if str(k).startswith("true")]
-    if leaked:
-        raise ValueError(f"estimators must not see ground truth; got columns {leaked}")
-    missing = [k for k in ("t", "delta", "vx", "ay", "yaw_rate") if k not in sensors]
-    if missing:
-        raise ParameterError(f"IMU estimation needs sensor columns {missing}")
+    check_sensor_columns(sensors, ("t", "delta", "vx", "ay", "yaw_rate"), "IMU estimation")
     rows = {k: np.asarray(sensors[k], dtype=float) for k in _COLUMNS if k in sensors}
     rows.setdefault("ax", np.zeros_like(rows["t"]))
     return rows

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Mapping
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -37,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..params import ParameterError, VehicleParams
 
 __all__ = [
+    "check_sensor_columns",
     "StateIndex",
     "STATE_NAMES",
     "MeasurementModel",
@@ -185,3 +187,14 @@ def from_error_state(xi: ArrayLike, vx: ArrayLike, kappa: ArrayLike) -> NDArray:
     x[..., StateIndex.E1] = xi[..., 0]
     x[..., StateIndex.E2] = xi[..., 2]
     return x
+
+
+def check_sensor_columns(sensors: Mapping, needed: tuple[str, ...] | list[str], who: str) -> None:
+    """Refuse ground truth (``true_*`` columns, :class:`ValueError`) and name the columns of
+    ``needed`` that ``sensors`` lacks (:class:`ParameterError`); ``who`` says which estimator."""
+    leaked = [k for k in sensors if str(k).startswith("true")]
+    if leaked:
+        raise ValueError(f"{who} must not see ground truth; got columns {leaked}")
+    missing = [k for k in needed if k not in sensors]
+    if missing:
+        raise ParameterError(f"{who} needs sensor columns {missing}")

@@ -35,7 +35,7 @@ from ..params import ParameterError, VehicleParams, _Params
 from . import _kernel as K
 from .basis import SoftClipBasis
 from .gains import ObserverGains
-from .model import MeasurementModel, StateIndex
+from .model import MeasurementModel, StateIndex, check_sensor_columns
 from .trace import HEALTH_NAMES, EstimateTrace
 
 __all__ = ["NeuroAdaptiveObserver", "AdaptationParams", "HealthParams", "sensor_rows", "CHANNELS", "N_BIAS_PARAMS"]
@@ -135,19 +135,12 @@ def sensor_rows(sensors: Mapping[str, ArrayLike], model: MeasurementModel) -> di
     ``kappa`` comes from ``kappa`` or ``psi_dot_des / vx``; channels the model does not read
     are NaN. Ground truth (``true_*``) is refused.
     """
-    leaked = [k for k in sensors if str(k).startswith("true")]
-    if leaked:
-        raise ValueError(f"estimators must not see ground truth; got columns {leaked}")
     need = ["t", "delta", "vx"]
     if model.uses_camera:
-        need += ["e1", "e2"]
+        need += ["e1", "e2"] + ([] if "psi_dot_des" in sensors else ["kappa"])
     if model.uses_imu:
         need += ["ay", "yaw_rate"]
-    missing = [k for k in need if k not in sensors]
-    if model.uses_camera and "kappa" not in sensors and "psi_dot_des" not in sensors:
-        missing.append("kappa")
-    if missing:
-        raise ParameterError(f"{model.name} estimation needs sensor columns {missing}")
+    check_sensor_columns(sensors, need, f"{model.name} estimation")
     get = lambda k: np.ascontiguousarray(np.asarray(sensors[k], dtype=float))  # noqa: E731
     t, delta, vx = get("t"), get("delta"), get("vx")
     n = len(t)
