@@ -1,25 +1,10 @@
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_env
-from stable_baselines3.common.env_checker import check_env as sb3_check_env
 from stable_baselines3.common.env_util import make_vec_env
 
 import tire_learning_env
 from tire_learning_env.params import ParameterError
-
-BASE_IDS = ["TireLearning-Cornering-v0", "TireLearning-LaneChange-v0", "TireLearning-LaneKeeping-v0"]
-
-
-@pytest.mark.parametrize("env_id", BASE_IDS)
-def test_gymnasium_env_checker(env_id):
-    check_env(gym.make(env_id).unwrapped, skip_render_check=False)
-
-
-@pytest.mark.parametrize("env_id", BASE_IDS)
-def test_sb3_env_checker(env_id):
-    with pytest.warns(UserWarning, match="symmetric and normalized"):
-        sb3_check_env(gym.make(env_id), warn=True)
 
 
 def rollout(env, seed, steps=60):
@@ -48,10 +33,16 @@ def test_nan_action_raises_and_out_of_range_is_clipped():
         env.step(np.array([np.nan]))
     with pytest.raises(ValueError, match="NaN or infinite"):
         env.step(np.array([np.inf]))
-    _, _, _, _, info = env.step(np.array([10.0]))
-    assert info["sensor_log"]["delta"].max() <= env.unwrapped.driver_params.max_steering + 1e-12
-    # the offset was clipped to max_steering_offset: delta - driver steering stays within it
-    assert np.all(np.isfinite(info["sensor_log"]["delta"]))
+    # an offset of 10 rad is clipped to max_steering_offset by the env: the same step as the bound itself
+    a, b = gym.make("TireLearning-Cornering-v0"), gym.make("TireLearning-Cornering-v0")
+    a.reset(seed=0)
+    b.reset(seed=0)
+    _, _, _, _, ia = a.step(np.array([10.0]))
+    _, _, _, _, ib = b.step(np.array([a.unwrapped.max_steering_offset], dtype=np.float32))
+    np.testing.assert_array_equal(ia["sensor_log"]["delta"], ib["sensor_log"]["delta"])
+    # the clipped steering stays below the simulator's own clamp (driver.max_steering), so an
+    # unclipped offset would give a different log: the comparison above can fail
+    assert ia["sensor_log"]["delta"].max() < a.unwrapped.driver_params.max_steering - 1e-3
 
 
 def test_unknown_config_key_is_named():

@@ -4,14 +4,11 @@ import importlib.util
 import json
 import math
 import sys
-import warnings
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_env
-from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import tire_learning_env
 from tire_learning_env.observer import build_observer
@@ -64,18 +61,7 @@ def _drive(env, offsets, seed=3):
     return total, terms, info
 
 
-# -- env checkers and registration ---------------------------------------------------------------
-def test_gymnasium_env_checker():
-    """The checker runs on the wrapper itself (``env.unwrapped`` would be the base env)."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=".*is different from the unwrapped version.*")
-        check_env(make_excitation_env(), skip_render_check=True)
-
-
-def test_sb3_env_checker():
-    sb3_check_env(gym.make(ENV_ID), warn=True)
-
-
+# -- registration (both env checkers: tests/test_registration.py) ---------------------------------
 def test_registered_spec_recreates_the_same_env():
     env = gym.make(ENV_ID, config={"ay_limit": 6.0})
     again = gym.make(env.spec)

@@ -5,8 +5,6 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_env
-from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import tire_learning_env
 from tire_learning_env.high_order import (
@@ -28,8 +26,6 @@ from tire_learning_env.high_order.plant import parameter_vector, static_state, t
 from tire_learning_env.params import CameraParams, DriverParams, ParameterError
 from tire_learning_env.roads import PiecewiseCurvatureRoad
 from tire_learning_env.simulation import Simulator
-
-HIGH_ORDER_IDS = ["TireLearning-HighOrderCornering-v0", "TireLearning-HighOrderLaneChange-v0"]
 
 
 def _params_with(**changes):
@@ -302,17 +298,6 @@ def test_missing_unknown_and_inconsistent_parameters_are_named():
 
 
 # -- environments ---------------------------------------------------------------------------
-@pytest.mark.parametrize("env_id", HIGH_ORDER_IDS)
-def test_gymnasium_env_checker(env_id):
-    check_env(gym.make(env_id).unwrapped, skip_render_check=False)
-
-
-@pytest.mark.parametrize("env_id", HIGH_ORDER_IDS)
-def test_sb3_env_checker(env_id):
-    with pytest.warns(UserWarning, match="symmetric and normalized"):
-        sb3_check_env(gym.make(env_id), warn=True)
-
-
 def test_env_has_the_base_env_spaces_and_info_keys():
     base = gym.make("TireLearning-LaneChange-v0")
     high = gym.make("TireLearning-HighOrderLaneChange-v0")
