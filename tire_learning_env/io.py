@@ -271,8 +271,13 @@ def _parse_csv(text: str, source: str, notes: list[str]) -> tuple[list[str], dic
 
 
 def read_log(path: str | Path, min_rows: int = 2, check_units: bool | None = None,
-             sensors: str = "auto") -> DrivingLog:
-    """Read a driving log in the shared CSV format.
+             sensors: str = "auto", channel_map: str | Path | None = None) -> DrivingLog:
+    """Read a driving log in the shared CSV format (or, by suffix, a logger's MF4, Parquet or MCAP file).
+
+    ``.mf4``/``.mdf``, ``.parquet``/``.pq`` and ``.mcap`` files go to
+    :func:`tire_learning_env.formats.read_logger_log` with ``channel_map`` (None: a
+    ``<stem>.channels.yaml``/``.json`` beside the log, else channels named as the columns);
+    everything else is read as CSV below.
 
     Accepted and noted: a UTF-8 byte-order mark, quoted column names. Refused with a short
     message naming the problem: binary or compressed files, non-UTF-8 text, ``;``/tab
@@ -300,6 +305,10 @@ def read_log(path: str | Path, min_rows: int = 2, check_units: bool | None = Non
     if sensors not in ("auto", "camera", "imu"):
         raise ValueError(f"sensors must be 'auto', 'camera' or 'imu', got {sensors!r}")
     path = Path(path)
+    if path.suffix.lower() in (".mf4", ".mdf", ".parquet", ".pq", ".mcap"):
+        from .formats import read_logger_log
+
+        return read_logger_log(path, channel_map, min_rows=min_rows, check_units=check_units, sensors=sensors)
     source = str(path)
     try:
         raw = path.read_bytes()
