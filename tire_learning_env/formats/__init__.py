@@ -1,0 +1,27 @@
+"""Logs as vehicle loggers write them: ASAM MDF4, Parquet, MCAP, with channel maps.
+
+:func:`tire_learning_env.io.read_log` dispatches ``.mf4``/``.mdf``, ``.parquet``/``.pq`` and
+``.mcap`` files here (:func:`read_logger_log`); CSV stays in :mod:`tire_learning_env.io`.
+The readers need the ``fleet`` extra (``pip install 'tire_learning_env[fleet]'``).
+"""
+
+from .channel_map import (COLUMN_UNITS, UNITS, ChannelMap, ChannelSpec, convert_unit, find_channel_map,
+                          load_channel_map)  # fmt: skip
+from .readers import LOGGER_SUFFIXES, read_logger_log
+from .writers import LOGGER_CHANNELS, logger_channel_map, save_channel_map, write_logger_log
+
+__all__ = [
+    "COLUMN_UNITS",
+    "UNITS",
+    "ChannelMap",
+    "ChannelSpec",
+    "convert_unit",
+    "find_channel_map",
+    "load_channel_map",
+    "LOGGER_SUFFIXES",
+    "read_logger_log",
+    "LOGGER_CHANNELS",
+    "logger_channel_map",
+    "save_channel_map",
+    "write_logger_log",
+]
