@@ -18,8 +18,8 @@ ENV_IDS: dict[str, tuple[str, dict, int]] = {
     "TireLearning-Highway-v0": ("tire_learning_env.envs.highway:HighwayTrafficEnv", {}, 1200),
     "TireLearning-Racetrack-v0": ("tire_learning_env.envs.highway:RacetrackTrafficEnv", {}, 1200),
     # high-order truth vehicle (CommonRoad multi-body model), see tire_learning_env.high_order
-    "TireLearning-HighOrderCornering-v0": ("tire_learning_env.high_order.env:HighOrderLaneKeepingEnv", {"road": "study1"}, 1200),
-    "TireLearning-HighOrderLaneChange-v0": ("tire_learning_env.high_order.env:HighOrderLaneKeepingEnv", {"road": "lane_changes"}, 1200),
+    "TireLearning-HighOrderCornering-v0": ("tire_learning_env.envs.high_order:HighOrderLaneKeepingEnv", {"road": "study1"}, 1200),
+    "TireLearning-HighOrderLaneChange-v0": ("tire_learning_env.envs.high_order:HighOrderLaneKeepingEnv", {"road": "lane_changes"}, 1200),
 }
 
 

@@ -31,7 +31,6 @@ import os
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
@@ -43,13 +42,11 @@ from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle as HighwayVehicle
 
 from .._kernels import CAMC_COUNT, CAMC_HEAD, CAMS_LATEST_E1, CAMS_LATEST_E2, LOG_COLUMNS, N_LOG, bicycle_rhs
-from ..dynamics import BicyclePlant, PlantEffects
 from ..driver import LaneKeepingDriver
-from ..params import CameraParams, DriverParams, ParameterError, TireParams, VehicleParams, check_keys, coerce_params
+from ..params import ParameterError, VehicleParams, check_keys
 from ..sensors import Camera
 from ..simulation import SENSOR_KEYS, Plant
-from ..tires import axle_tires
-from .lane_keeping import _PARAM_TYPES
+from ._base import TireLearningEnv, whole_rate_ratio
 from .highway_kernel import (
     STOP_BLOWUP,
     STOP_HANDOVER,
@@ -319,15 +316,8 @@ class _ViewerScene:
         pass
 
 
-def _as_params(name: str, value: Any):
-    """The config entry ``name`` as its parameter dataclass, ``None`` when not given."""
-    return coerce_params(_PARAM_TYPES[name], value, name)
-
-
-class _TrafficEnv(gym.Env):
+class _TrafficEnv(TireLearningEnv):
     """Shared machinery of the highway-env scenes (see :class:`HighwayTrafficEnv`)."""
-
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
     #: Time after a lane change ends before the next may start [s] (stops MOBIL ping-pong).
     LANE_CHANGE_COOLDOWN = 3.0
@@ -380,12 +370,7 @@ class _TrafficEnv(gym.Env):
         check_keys(f"{type(self).__name__} arguments", kwargs, allowed)
         args = dict(self._DEFAULTS)
         args.update(kwargs)
-        if config is not None:
-            if not isinstance(config, Mapping):
-                raise ParameterError(f"config must be a dict, got {type(config).__name__}")
-            check_keys(f"{type(self).__name__} config", config, allowed)
-            args.update(config)
-        self.config = args
+        self.config = args = self._merge_config(args, config, allowed)
 
         # scene first: the default vehicle speed is the scene's cruise speed
         self._build_network(args)
@@ -396,36 +381,22 @@ class _TrafficEnv(gym.Env):
         if not (self.target_speed > 0 and self.initial_speed > 0 and self.min_speed > 0):
             raise ParameterError("target_speed, initial_speed and min_speed must be > 0 [m/s]")
 
-        vehicle = _as_params("vehicle", args["vehicle"])
-        self.vehicle: VehicleParams = vehicle if vehicle is not None else VehicleParams(vx=self.target_speed)
-        self.tire_params: TireParams = _as_params("tire", args["tire"]) or TireParams()
-        self.camera_params: CameraParams = _as_params("camera", args["camera"]) or CameraParams()
-        self.driver_params: DriverParams = _as_params("driver", args["driver"]) or DriverParams()
-        self.effects: PlantEffects = _as_params("effects", args["effects"]) or PlantEffects()
-
-        self.physics_rate = float(args["physics_rate"])
-        self.policy_rate = float(args["policy_rate"])
+        self._init_params(args, default_vehicle=VehicleParams(vx=self.target_speed) if args["vehicle"] is None else None)
         self.traffic_frequency = float(args["traffic_frequency"])
-        if not (self.physics_rate > 0 and self.policy_rate > 0 and self.traffic_frequency > 0):
-            raise ParameterError("physics_rate, policy_rate and traffic_frequency must be > 0 [Hz]")
-        self.ticks_per_step = self._whole_ratio("physics_rate / policy_rate", self.physics_rate, self.policy_rate)
-        self.ticks_per_traffic = self._whole_ratio(
+        if not self.traffic_frequency > 0:
+            raise ParameterError("traffic_frequency must be > 0 [Hz]")
+        self._init_rates(args["physics_rate"], args["policy_rate"])
+        self.ticks_per_traffic = whole_rate_ratio(
             "physics_rate / traffic_frequency", self.physics_rate, self.traffic_frequency
         )
         self.dt = 1.0 / self.physics_rate
 
-        if args["action_mode"] not in ("offset", "full"):
-            raise ParameterError(f"action_mode must be 'offset' or 'full', got {args['action_mode']!r}")
-        self.action_mode = args["action_mode"]
         if args["lane_change"] not in ("rule", "action", "off"):
             raise ParameterError(f"lane_change must be 'rule', 'action' or 'off', got {args['lane_change']!r}")
         self.lane_change = args["lane_change"]
         if args["longitudinal"] not in ("idm", "constant"):
             raise ParameterError(f"longitudinal must be 'idm' or 'constant', got {args['longitudinal']!r}")
         self.longitudinal = args["longitudinal"]
-        self.max_steering_offset = float(args["max_steering_offset"])
-        if not self.max_steering_offset > 0:
-            raise ParameterError("max_steering_offset must be > 0 [rad]")
         self.lane_change_time = float(args["lane_change_time"])
         if not self.lane_change_time > 0:
             raise ParameterError("lane_change_time must be > 0 [s]")
@@ -442,55 +413,24 @@ class _TrafficEnv(gym.Env):
             raise ParameterError("max_lateral_acceleration must be > 0 [m/s^2]")
         if not self.curvature_preview >= 0:
             raise ParameterError("curvature_preview must be >= 0 [s]")
-        thr = args["departure_threshold"]
         lane_width = self.network.get_lane(next(iter(self.network.lanes_dict()))).width_at(0.0)
         self.lane_width = float(lane_width)
-        self.departure_threshold = 0.5 * (self.lane_width - self.vehicle.width) if thr is None else float(thr)
-        if not self.departure_threshold > 0:
-            raise ParameterError(f"departure_threshold must be > 0, got {self.departure_threshold!r}")
-        std = args["initial_state_std"]
-        self.initial_state_std = np.zeros(4) if std is None else np.asarray(std, dtype=float).reshape(4)
+        self._init_task(args, lane_width=self.lane_width)
 
-        if plant_factory is not None:
-            self.plant = plant_factory(self.vehicle)
-        else:
-            front, rear = (
-                args["tires"]
-                if args["tires"] is not None
-                else axle_tires(self.vehicle, args["tire_model"], self.tire_params)
-            )
-            self.plant = BicyclePlant(self.vehicle, front, rear, self.effects)
+        self._init_plant(args, plant_factory)
         self._compiled = hasattr(self.plant, "kernel_params")
         self.camera = Camera(self.camera_params, self.dt)
         self.driver = LaneKeepingDriver(self.driver_params, self.vehicle)
 
-        max_steer = self.driver_params.max_steering
-        if self.lane_change == "action":
-            self.action_space = spaces.Discrete(3)
-        else:
-            a_max = self.max_steering_offset if self.action_mode == "offset" else max_steer
-            self.action_space = spaces.Box(-a_max, a_max, shape=(1,), dtype=np.float32)
-        low = [-10.0, -math.pi, 0.0, 0.0, -0.2, -max_steer]
-        high = [10.0, math.pi, 10.0, 100.0, 0.2, max_steer]
-        low = np.array(low + list(_TRAFFIC_LOW) * self.traffic_features, dtype=np.float32)
-        high = np.array(high + list(_TRAFFIC_HIGH) * self.traffic_features, dtype=np.float32)
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        self._obs_low, self._obs_high = low, high
-
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ParameterError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
-        self.render_mode = render_mode
-        self.metadata = dict(self.metadata, render_fps=int(round(self.policy_rate)))
+        self._init_spaces(
+            list(_TRAFFIC_LOW) * self.traffic_features,
+            list(_TRAFFIC_HIGH) * self.traffic_features,
+            action_space=spaces.Discrete(3) if self.lane_change == "action" else None,
+        )
+        self._init_render_mode(render_mode)
         self._viewer = None
         self.road: HighwayRoad | None = None
         self.ego: TruthEgoVehicle | None = None
-
-    @staticmethod
-    def _whole_ratio(name: str, a: float, b: float) -> int:
-        ratio = a / b
-        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-            raise ParameterError(f"{name} must be a whole number >= 1, got {a}/{b}")
-        return int(round(ratio))
 
     # -- scene hooks (subclasses) ----------------------------------------------------
     def _build_network(self, args: dict) -> None:
@@ -604,11 +544,6 @@ class _TrafficEnv(gym.Env):
         return self.tick_index * self.dt
 
     @property
-    def estimator_inputs(self) -> dict[str, Any]:
-        """What an estimator may know about this env: vehicle nominal params, rates, camera noise."""
-        return {"vehicle": self.vehicle, "physics_dt": self.dt, "camera": self.camera_params}
-
-    @property
     def target_lane_object(self) -> AbstractLane:
         """The highway-env lane the ego currently follows."""
         return self.network.get_lane(self.target_lane)
@@ -621,12 +556,8 @@ class _TrafficEnv(gym.Env):
                 raise ValueError(f"action must be 0 (keep), 1 (lane id - 1) or 2 (lane id + 1), got {action!r}")
             self._pending_lane_action = int(a[0])
             return 0.0, math.nan
-        a = np.asarray(action, dtype=float).reshape(-1)
-        if a.size != 1:
-            raise ValueError(f"action must hold one steering value [rad], got shape {np.shape(action)}")
-        if not np.isfinite(a[0]):
-            raise ValueError(f"action must be finite, got {a[0]!r} (NaN or infinite steering)")
-        value = float(np.clip(a[0], self.action_space.low[0], self.action_space.high[0]))
+        requested = self._check_steering_action(action)
+        value = float(np.clip(requested, self.action_space.low[0], self.action_space.high[0]))
         return (value, math.nan) if self.action_mode == "offset" else (0.0, value)
 
     def _lane_change_busy(self) -> bool:
@@ -827,16 +758,11 @@ class _TrafficEnv(gym.Env):
 
     # -- observation and info -----------------------------------------------------
     def _observation(self) -> NDArray[np.float32]:
-        e1, e2 = self.camera.latest
-        if e1 != e1:
-            e1, e2, age = 0.0, 0.0, 10.0
-        else:
-            age = self.t - self.camera.latest_time
         kappa = self.reference.kappa(self.target_lane, self.s)
-        obs = [e1, e2, age, self.vx, kappa, self.last_delta]
+        obs = self._base_observation(self.camera, self.t, self.vx, kappa, self.last_delta)
         if self.traffic_features:
             obs += list(self._traffic_observation())
-        return np.clip(np.array(obs, dtype=np.float32), self._obs_low, self._obs_high)
+        return self._clip_observation(obs)
 
     def _traffic_observation(self) -> NDArray:
         """``[present, ds, dl, dv]`` of the nearest vehicles in the target lane's frame."""

@@ -2,51 +2,23 @@
 
 from __future__ import annotations
 
-import math
 from typing import Any, Callable, Mapping
 
-import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from numpy.typing import NDArray
 
-from ..dynamics import BicyclePlant, PlantEffects
-from ..params import (
-    CameraParams,
-    DriverParams,
-    ParameterError,
-    RoadParams,
-    TireParams,
-    VehicleParams,
-    check_keys,
-    coerce_params,
-)
+from ..dynamics import PlantEffects
+from ..params import CameraParams, DriverParams, RoadParams, TireParams, VehicleParams
 from ..rendering import TopDownRenderer
 from ..roads import Road, make_road
 from ..simulation import Plant, SimulationLog, Simulator
-from ..tires import TireModel, axle_tires
+from ..tires import TireModel
+from ._base import OBSERVATION_NAMES, TireLearningEnv
 
 __all__ = ["LaneKeepingEnv", "OBSERVATION_NAMES"]
 
-OBSERVATION_NAMES = ("e1", "e2", "frame_age", "vx", "kappa", "last_delta")
 
-_PARAM_TYPES = {
-    "vehicle": VehicleParams,
-    "tire": TireParams,
-    "camera": CameraParams,
-    "driver": DriverParams,
-    "effects": PlantEffects,
-    "road_params": RoadParams,
-}
-
-
-def _as_params(name: str, value: Any):
-    """The config entry ``name`` as its parameter dataclass (defaults when ``None``)."""
-    cls = _PARAM_TYPES[name]
-    return coerce_params(cls, value, name) or cls()
-
-
-class LaneKeepingEnv(gym.Env):
+class LaneKeepingEnv(TireLearningEnv):
     """A car keeping its lane at constant speed; the truth tire is nonlinear.
 
     ## Description
@@ -181,65 +153,18 @@ class LaneKeepingEnv(gym.Env):
             departure_threshold=departure_threshold,
             initial_state_std=initial_state_std,
         )
-        if config is not None:
-            check_keys(f"{type(self).__name__} config", config, self._CONFIG_KEYS)
-            args.update(config)
-        self.vehicle: VehicleParams = _as_params("vehicle", args["vehicle"])
-        self.tire_params: TireParams = _as_params("tire", args["tire"])
-        self.camera_params: CameraParams = _as_params("camera", args["camera"])
-        self.driver_params: DriverParams = _as_params("driver", args["driver"])
-        self.effects: PlantEffects = _as_params("effects", args["effects"])
-        self.road_params: RoadParams = _as_params("road_params", args["road_params"])
+        args = self._merge_config(args, config)
+        self._init_params(args)
+        self.road_params: RoadParams = self._params("road_params", args["road_params"])
         self.road: Road = make_road(args["road"], self.road_params)
-        self.physics_rate = float(args["physics_rate"])
-        self.policy_rate = float(args["policy_rate"])
-        if not (self.physics_rate > 0 and self.policy_rate > 0):
-            raise ParameterError("physics_rate and policy_rate must be > 0")
-        ratio = self.physics_rate / self.policy_rate
-        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-            raise ParameterError(
-                f"physics_rate / policy_rate must be a whole number >= 1, got {self.physics_rate}/{self.policy_rate}"
-            )
-        self.ticks_per_step = int(round(ratio))
-        if args["action_mode"] not in ("offset", "full"):
-            raise ParameterError(f"action_mode must be 'offset' or 'full', got {args['action_mode']!r}")
-        self.action_mode = args["action_mode"]
-        self.max_steering_offset = float(args["max_steering_offset"])
-        if not self.max_steering_offset > 0:
-            raise ParameterError("max_steering_offset must be > 0")
-        thr = args["departure_threshold"]
-        self.departure_threshold = (
-            0.5 * (self.road.lane_width - self.vehicle.width) if thr is None else float(thr)
-        )
-        if not self.departure_threshold > 0:
-            raise ParameterError(f"departure_threshold must be > 0, got {self.departure_threshold!r}")
-        std = args["initial_state_std"]
-        self.initial_state_std = np.zeros(4) if std is None else np.asarray(std, dtype=float).reshape(4)
-
-        if plant_factory is not None:
-            plant = plant_factory(self.vehicle)
-        else:
-            front, rear = args["tires"] if args["tires"] is not None else axle_tires(
-                self.vehicle, args["tire_model"], self.tire_params
-            )
-            plant = BicyclePlant(self.vehicle, front, rear, self.effects)
-        self.plant = plant
+        self._init_rates(args["physics_rate"], args["policy_rate"])
+        self._init_task(args, lane_width=self.road.lane_width)
+        plant = self._init_plant(args, plant_factory)
         self.sim = Simulator(
             plant, self.road, self.camera_params, self.driver_params, self.vehicle, 1.0 / self.physics_rate
         )
-
-        max_steer = self.driver_params.max_steering
-        a_max = self.max_steering_offset if self.action_mode == "offset" else max_steer
-        self.action_space = spaces.Box(-a_max, a_max, shape=(1,), dtype=np.float32)
-        high = np.array([10.0, math.pi, 10.0, 100.0, 0.2, max_steer], dtype=np.float32)
-        low = np.array([-10.0, -math.pi, 0.0, 0.0, -0.2, -max_steer], dtype=np.float32)
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        self._obs_low, self._obs_high = low, high
-
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ParameterError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
-        self.render_mode = render_mode
-        self.metadata = dict(self.metadata, render_fps=int(round(self.policy_rate)))
+        self._init_spaces()
+        self._init_render_mode(render_mode)
         self._renderer: TopDownRenderer | None = None
         self._last_log: SimulationLog | None = None
 
@@ -255,12 +180,8 @@ class LaneKeepingEnv(gym.Env):
         return obs, self._info_now()
 
     def step(self, action):
-        a = np.asarray(action, dtype=float).reshape(-1)
-        if a.size != 1:
-            raise ValueError(f"action must hold one steering value [rad], got shape {np.shape(action)}")
-        if not np.isfinite(a[0]):
-            raise ValueError(f"action must be finite, got {a[0]!r} (NaN or infinite steering)")
-        value = float(np.clip(a[0], self.action_space.low[0], self.action_space.high[0]))
+        requested = self._check_steering_action(action)
+        value = float(np.clip(requested, self.action_space.low[0], self.action_space.high[0]))
         if self.action_mode == "offset":
             log = self.sim.advance(self.ticks_per_step, steering_offset=value)
         else:
@@ -284,33 +205,11 @@ class LaneKeepingEnv(gym.Env):
 
     # -- helpers ------------------------------------------------------------------------
     def _observation(self) -> NDArray[np.float32]:
-        cam = self.sim.camera
-        e1, e2 = cam.latest
-        if e1 != e1:  # no frame delivered yet (at reset): zeros with the saturated age
-            e1, e2, age = 0.0, 0.0, 10.0
-        else:
-            age = self.sim.t - cam.latest_time
         kappa, _ = self.sim.table.lookup(self.sim.s)
-        obs = np.array([e1, e2, age, self.sim._speed(self.sim.t)[0], kappa, self.sim.last_delta], dtype=np.float32)
-        return np.clip(obs, self._obs_low, self._obs_high)
+        values = self._base_observation(self.sim.camera, self.sim.t, self.sim._speed(self.sim.t)[0], kappa, self.sim.last_delta)
+        return self._clip_observation(values)
 
     def _info_now(self) -> dict[str, Any]:
-        out = self.sim.plant.output() if hasattr(self.sim.plant, "output") else None
         info: dict[str, Any] = {"t": self.sim.t}
-        if out is not None:
-            info.update(
-                true_state=out.xi,
-                true_slip=out.slip,
-                true_force=out.force,
-                true_force_nonlinear=out.force_nonlinear,
-            )
+        info.update(self._plant_truth())
         return info
-
-    @property
-    def estimator_inputs(self) -> dict[str, Any]:
-        """What an estimator may know about this env: vehicle nominal params, rates, camera noise."""
-        return {
-            "vehicle": self.vehicle,
-            "physics_dt": 1.0 / self.physics_rate,
-            "camera": self.camera_params,
-        }

@@ -15,7 +15,7 @@ with a tire relaxation length, a steering servo option and a PI speed controller
 - :mod:`.simulate`: :func:`simulate_high_order` (closed loop with the built-in driver and
   camera), :func:`steady_state_cornering`, :func:`effective_cornering_stiffness`,
   :func:`steady_state_axle_curves` (the scoring references for a bicycle-model estimator).
-- :mod:`.env`: :class:`HighOrderLaneKeepingEnv`, the lane-keeping env on this plant
+- The lane-keeping env on this plant is :class:`tire_learning_env.envs.high_order.HighOrderLaneKeepingEnv`
   (``TireLearning-HighOrderCornering-v0``, ``TireLearning-HighOrderLaneChange-v0``).
 
 The mapping (parameter set, units, what "axle force" means, relaxation) is documented in

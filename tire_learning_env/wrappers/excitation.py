@@ -113,7 +113,7 @@ from numpy.typing import NDArray
 from ..dynamics import BicyclePlant
 from ..metrics import AXLES, convergence_time, curve_nrmse, excited_range
 from ..observer import ObserverConfig
-from ..params import CameraParams, ParameterError, TireParams, VehicleParams, _Params
+from ..params import CameraParams, ParameterError, TireParams, VehicleParams, _Params, coerce_params
 from ..tires import PacejkaTire
 from .estimator import EstimatorWrapper
 from .safety import LateralAccelerationFilter
@@ -434,16 +434,6 @@ class TruthRandomization(_Params):
         return BicyclePlant(vehicle, front, rear, effects)
 
 
-def _as(cls, value, name):
-    if value is None:
-        return cls()
-    if isinstance(value, cls):
-        return value
-    if isinstance(value, Mapping):
-        return cls.from_dict(value)
-    raise ParameterError(f"{name} must be a {cls.__name__}, a dict or None, got {type(value).__name__}")
-
-
 class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Excitation task around an :class:`EstimatorWrapper` (see the module docstring).
 
@@ -517,9 +507,9 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 f"ExcitationWrapper needs an EstimatorWrapper directly inside it, got {type(env).__name__}; "
                 "wrap the env with EstimatorWrapper first (or use make_excitation_env)"
             )
-        self.config: ExcitationConfig = _as(ExcitationConfig, config, "config")
+        self.config: ExcitationConfig = coerce_params(ExcitationConfig, config, "config") or ExcitationConfig()
         self.randomization: TruthRandomization | None = (
-            None if randomization is None else _as(TruthRandomization, randomization, "randomization")
+            None if randomization is None else coerce_params(TruthRandomization, randomization, "randomization")
         )
         self.record = bool(record)
         self.info_logs = bool(info_logs)
@@ -902,7 +892,7 @@ def make_highway_excitation_env(
 def _wrap(env_cls, defaults, env_kwargs, config, randomization, observer_config, record, keep_history, info_logs):
     """Base env (``defaults`` overridden by ``env_kwargs``; the steering-offset range from the
     config) -> :class:`EstimatorWrapper` -> :class:`ExcitationWrapper`."""
-    cfg = _as(ExcitationConfig, config, "config")
+    cfg = coerce_params(ExcitationConfig, config, "config") or ExcitationConfig()
     base = env_cls(**{**defaults, **env_kwargs, "max_steering_offset": cfg.max_steering_offset})
     rnd = TruthRandomization() if randomization is True else (None if randomization is False else randomization)
     est = EstimatorWrapper(base, config=observer_config, keep_history=keep_history)

@@ -4,23 +4,13 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-from ..envs.lane_keeping import LaneKeepingEnv
-from ..params import CameraParams, DriverParams, ParameterError, RoadParams, VehicleParams, check_keys
+from ..high_order.params import HighOrderConfig, MultiBodyParams, bmw_320i
+from ..high_order.plant import MultiBodyPlant, equivalent_bicycle
+from ..params import CameraParams, DriverParams, RoadParams, VehicleParams, coerce_params
 from ..roads import Road, make_road
-from .params import HighOrderConfig, MultiBodyParams, bmw_320i
-from .plant import MultiBodyPlant, equivalent_bicycle
+from .lane_keeping import LaneKeepingEnv
 
 __all__ = ["HighOrderLaneKeepingEnv"]
-
-
-def _as(cls: type, name: str, value: Any, default):
-    if value is None:
-        return default()
-    if isinstance(value, cls):
-        return value
-    if isinstance(value, Mapping):
-        return cls.from_dict(value)
-    raise ParameterError(f"{name} must be a {cls.__name__} or a dict, got {type(value).__name__}")
 
 
 class HighOrderLaneKeepingEnv(LaneKeepingEnv):
@@ -90,14 +80,14 @@ class HighOrderLaneKeepingEnv(LaneKeepingEnv):
             departure_threshold=departure_threshold,
             initial_state_std=initial_state_std,
         )
-        if config is not None:
-            check_keys(f"{type(self).__name__} config", config, self._CONFIG_KEYS)
-            args.update(config)
-        self.high_order_params: MultiBodyParams = _as(MultiBodyParams, "high_order", args.pop("high_order"), bmw_320i)
-        self.high_order_config: HighOrderConfig = _as(
-            HighOrderConfig, "high_order_config", args.pop("high_order_config"), HighOrderConfig
+        args = self._merge_config(args, config)
+        self.high_order_params: MultiBodyParams = (
+            coerce_params(MultiBodyParams, args.pop("high_order"), "high_order") or bmw_320i()
         )
-        rp = _as(RoadParams, "road_params", args["road_params"], RoadParams)
+        self.high_order_config: HighOrderConfig = (
+            coerce_params(HighOrderConfig, args.pop("high_order_config"), "high_order_config") or HighOrderConfig()
+        )
+        rp = self._params("road_params", args["road_params"])
         road_obj = make_road(args["road"], rp)
         if args["vehicle"] is None:
             args["vehicle"] = equivalent_bicycle(self.high_order_params)
