@@ -7,8 +7,8 @@ The readers need the ``fleet`` extra (``pip install 'tire_learning_env[fleet]'``
 
 from .channel_map import (COLUMN_UNITS, UNITS, ChannelMap, ChannelSpec, convert_unit, find_channel_map,
                           load_channel_map)  # fmt: skip
-from .readers import LOGGER_SUFFIXES, read_logger_log
-from .writers import LOGGER_CHANNELS, logger_channel_map, save_channel_map, write_logger_log
+from .readers import LOGGER_SUFFIXES, default_channel_map, read_logger_log
+from .writers import LOGGER_CHANNELS, logger_channel_map, save_channel_map, write_example_logs, write_logger_log
 
 __all__ = [
     "COLUMN_UNITS",
@@ -20,8 +20,10 @@ __all__ = [
     "load_channel_map",
     "LOGGER_SUFFIXES",
     "read_logger_log",
+    "default_channel_map",
     "LOGGER_CHANNELS",
     "logger_channel_map",
     "save_channel_map",
     "write_logger_log",
+    "write_example_logs",
 ]

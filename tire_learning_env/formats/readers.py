@@ -16,11 +16,12 @@ NaN, as in the CSV format. Channels sampled at exactly the row times are copied 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,7 +29,7 @@ from numpy.typing import NDArray
 from ..io import SENSOR_COLUMNS, DrivingLog, LogFormatError, _choose_sensors, _validate, check_log_units, current_run_context
 from .channel_map import UNITS, ChannelMap, ChannelSpec, convert_unit, find_channel_map, load_channel_map
 
-__all__ = ["LOGGER_SUFFIXES", "read_logger_log", "read_channels", "RawChannel"]
+__all__ = ["LOGGER_SUFFIXES", "read_logger_log", "read_channels", "RawChannel", "default_channel_map"]
 
 LOGGER_SUFFIXES = {".mf4": "mf4", ".mdf": "mf4", ".parquet": "parquet", ".pq": "parquet", ".mcap": "mcap"}
 EVENT_COLUMNS = ("e1", "e2")  # camera frames: NaN where no frame arrived
@@ -221,8 +222,30 @@ def _resample(base: NDArray, t: NDArray, v: NDArray, column: str) -> NDArray:
     return out
 
 
+_DEFAULT_MAPS: list[str | Path | ChannelMap] = []
+
+
+@contextlib.contextmanager
+def default_channel_map(channel_map: str | Path | ChannelMap | None) -> Iterator[None]:
+    """In the body, logger files without a map beside them use ``channel_map``.
+
+    This is how ``tire-learning batch --channel-map`` reaches the readers inside the
+    estimate and discrepancy commands (which call :func:`~tire_learning_env.io.read_log`
+    with the log path only). Precedence: the ``channel_map`` argument of the reader, a map
+    beside the log, this default, the channels named as the columns.
+    """
+    if channel_map is None:
+        yield
+        return
+    _DEFAULT_MAPS.append(channel_map)
+    try:
+        yield
+    finally:
+        _DEFAULT_MAPS.pop()
+
+
 def _given_map(path: Path, channel_map) -> tuple[ChannelMap | None, str]:
-    """The channel map given or found beside the log, and a note saying which (None: none)."""
+    """The channel map given, found beside the log, or the default, and a note saying which (None: none)."""
     if isinstance(channel_map, ChannelMap):
         return channel_map, f"channel map {channel_map.source}"
     if channel_map is not None:
@@ -230,6 +253,10 @@ def _given_map(path: Path, channel_map) -> tuple[ChannelMap | None, str]:
     found = find_channel_map(path)
     if found is not None:
         return load_channel_map(found), f"channel map {found} (found beside the log)"
+    if _DEFAULT_MAPS:
+        default = _DEFAULT_MAPS[-1]
+        cmap = default if isinstance(default, ChannelMap) else load_channel_map(default)
+        return cmap, f"channel map {cmap.source} (the default given to the batch)"
     return None, ""
 
 
@@ -266,7 +293,7 @@ def read_logger_log(path: str | Path, channel_map: str | Path | ChannelMap | Non
     path = Path(path)
     source = str(path)
     cmap, map_note = _given_map(path, channel_map)
-    wanted = [spec.channel for spec in cmap.columns.values()] if cmap is not None else []
+    wanted = [spec.channel for c, spec in cmap.columns.items() if c != "t"] if cmap is not None else []
     fmt, names, get = read_channels(path, wanted)
     if cmap is None:
         cmap = ChannelMap.identity(names)
@@ -279,6 +306,9 @@ def read_logger_log(path: str | Path, channel_map: str | Path | ChannelMap | Non
     raw: dict[str, RawChannel] = {}
     values: dict[str, NDArray] = {}
     for column, spec in cmap.columns.items():
+        if column == "t" and fmt != "parquet":
+            notes.append(f"the map's 't' <- {spec.channel!r} is for tables; {fmt.upper()} channels carry their own times")
+            continue
         try:
             ch = get(spec.channel)
         except KeyError:

@@ -23,7 +23,7 @@ from ..io import atomic_write_text
 from .channel_map import UNITS, ChannelMap
 from .readers import LOGGER_SUFFIXES
 
-__all__ = ["LOGGER_CHANNELS", "logger_channel_map", "write_logger_log", "save_channel_map"]
+__all__ = ["LOGGER_CHANNELS", "logger_channel_map", "write_logger_log", "save_channel_map", "write_example_logs"]
 
 # log column -> (logger channel, unit written, scale); the file holds SI / unit factor / scale.
 LOGGER_CHANNELS: dict[str, tuple[str, str, float]] = {
@@ -67,14 +67,43 @@ def logger_channel_map(columns: list[str], fmt: str) -> ChannelMap:
     """The channel map of a file written by :func:`write_logger_log` with ``columns``."""
     doc: dict = {"time_base": "vx", "columns": {},
                  "description": "written by tire_learning_env.formats.write_logger_log (simulated drive)"}  # fmt: skip
-    if fmt == "parquet":
-        doc["columns"]["t"] = {"channel": "timestamp_ms", "unit": "ms"}
+    doc["columns"]["t"] = {"channel": "timestamp_ms", "unit": "ms"}  # the time column of a table (Parquet)
     for c in columns:
         if c == "t":
             continue
         name, unit, scale = _channel(c, fmt)
         doc["columns"][c] = {"channel": name, "unit": unit, **({"scale": scale} if scale != 1.0 else {})}
     return ChannelMap.from_dict(doc, f"<{fmt} logger map>")
+
+
+def write_example_logs(folder: str | Path, duration: float = 30.0, seed: int = 7) -> list[Path]:
+    """Simulate a drive and write it as ``example_drive.mf4``, ``example_drive.parquet`` and
+    their shared channel map ``example_drive.channels.yaml`` (how the shipped examples in
+    ``tire_learning_env/data/`` were made).
+
+    Parameters
+    ----------
+    folder : str or Path
+    duration : float
+        Simulated time [s] (30 s at 50 rows/s keeps each file under 300 kB).
+    seed : int
+        Seed of the camera noise.
+    """
+    from ..params import CameraParams
+    from ..simulation import simulate
+
+    folder = Path(folder)
+    log = simulate("study1", duration, camera=CameraParams.paper_noise(rate=20.0), physics_rate=1000.0, seed=seed)
+    cols = log.to_columns()
+    keep = np.zeros(len(cols["t"]), dtype=bool)
+    keep[::20] = True  # 50 rows/s, plus every camera frame
+    keep |= np.isfinite(cols["e1"])
+    cols = {k: v[keep] for k, v in cols.items() if k not in ("true_vy", "true_beta")}
+    paths = [folder / "example_drive.mf4", folder / "example_drive.parquet"]
+    for p in paths:
+        write_logger_log(p, cols)
+    save_channel_map(logger_channel_map(list(cols), "mf4"), folder / "example_drive.channels.yaml")
+    return paths + [folder / "example_drive.channels.yaml"]
 
 
 def _raw(column: str, values: NDArray, fmt: str) -> tuple[str, str, NDArray]:
