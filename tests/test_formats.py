@@ -173,11 +173,12 @@ def test_same_estimate_as_csv(tmp_path, columns):
     from tire_learning_env.params import VehicleParams
 
     write_log(tmp_path / "d.csv", columns)
-    for fmt in FORMATS:
-        write_logger_log(tmp_path / f"d.{fmt}", columns, channel_map=tmp_path / "d.channels.yaml")
+    for fmt in FORMATS:  # each in its own folder: the MCAP map names topics, the MF4 map channels
+        (tmp_path / fmt).mkdir()
+        write_logger_log(tmp_path / fmt / f"d.{fmt}", columns, channel_map=tmp_path / fmt / "d.channels.yaml")
     cfg = ObserverConfig(sensors="camera", offline=False)
-    k = [estimate(read_log(tmp_path / f"d.{s}").sensors, VehicleParams(), None, config=cfg).cornering_stiffness()
-         for s in ("csv",) + FORMATS]  # fmt: skip
+    paths = [tmp_path / "d.csv"] + [tmp_path / fmt / f"d.{fmt}" for fmt in FORMATS]
+    k = [estimate(read_log(p).sensors, VehicleParams(), None, config=cfg).cornering_stiffness() for p in paths]
     assert all(np.all(np.isfinite(ki)) for ki in k)
     for ki in k[1:]:
         np.testing.assert_allclose(ki, k[0], rtol=1e-6)
