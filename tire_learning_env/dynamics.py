@@ -338,6 +338,22 @@ class BicyclePlant:
         self._last_inputs = (delta, vx + dt * ax, ax, p2, q2)
         return out
 
+    def hold_inputs(self, delta: float, vx: float, ax: float, psi_dot_des: float, psi_ddot_des: float) -> None:
+        """Record the inputs held at the current state, as :meth:`step` does, for :meth:`output`.
+
+        A loop that advances :attr:`state` itself (the compiled chunk loop) calls this at its end.
+
+        Parameters
+        ----------
+        delta : float
+            Road-wheel angle [rad].
+        vx, ax : float
+            Speed [m/s] and longitudinal acceleration [m/s^2].
+        psi_dot_des, psi_ddot_des : float
+            Desired yaw rate [rad/s] and acceleration [rad/s^2].
+        """
+        self._last_inputs = (delta, vx, ax, psi_dot_des, psi_ddot_des)
+
     def kernel_params(self) -> tuple:
         """Parameter arrays in the order the compiled kernels take them (``veh, tf, tr, tabf, tabr, eff``)."""
         return self.veh_vec, self.tire_f, self.tire_r, self.table_f, self.table_r, self.eff_vec

@@ -181,6 +181,10 @@ class Simulator:
         self.driver.reset()
         self.last_delta = 0.0
 
+    def speed_at(self, t: float) -> tuple[float, float]:
+        """Speed [m/s] and longitudinal acceleration [m/s^2] at time ``t`` [s] (the profile, or constant)."""
+        return self._speed(t)
+
     def _constant_speed(self, t: float) -> tuple[float, float]:
         return self._vx0
 
@@ -237,7 +241,7 @@ class Simulator:
         # the inputs held at the end of the chunk, as BicyclePlant.step records them (for output())
         k, dk = self.table.lookup(s)
         vx_end = vx + self.dt * ax
-        self.plant._last_inputs = (delta, vx_end, ax, vx_end * k, vx_end * vx_end * dk + ax * k)
+        self.plant.hold_inputs(delta, vx_end, ax, vx_end * k, vx_end * vx_end * dk + ax * k)
 
     def _advance_python(self, n_ticks: int, steering_offset: float, steering: float | None, out: NDArray) -> None:
         """The same tick sequence as :func:`._kernels.advance_bicycle`, for any plant."""

@@ -187,6 +187,11 @@ class TireLearningEnv(gym.Env):
         self.render_mode = render_mode
         self.metadata = dict(self.metadata, render_fps=int(round(self.policy_rate)))
 
+    def set_plant(self, plant: Plant) -> None:
+        """Use ``plant`` as the truth vehicle from the next :meth:`reset` on (e.g. a randomised
+        truth per episode). Subclasses that hand the plant on (a simulator) override this."""
+        self.plant = plant
+
     # -- shared step pieces --------------------------------------------------------------------
     @staticmethod
     def _check_steering_action(action) -> float:

@@ -537,6 +537,11 @@ class _TrafficEnv(TireLearningEnv):
             self._viewer.close()
             self._viewer = None
 
+    def set_plant(self, plant: Plant) -> None:
+        """Use ``plant`` as the truth vehicle from the next :meth:`reset` on (compiled loop if it can)."""
+        super().set_plant(plant)
+        self._compiled = hasattr(plant, "kernel_params")
+
     # -- properties ---------------------------------------------------------------
     @property
     def t(self) -> float:

@@ -203,10 +203,15 @@ class LaneKeepingEnv(TireLearningEnv):
         x = self.sim.plant.state
         return self._renderer.render(self.sim.s, x[0], x[2], self.vehicle.wheelbase + 1.8, self.vehicle.width)
 
+    def set_plant(self, plant: Plant) -> None:
+        """Use ``plant`` as the truth vehicle (here and in the simulator) from the next :meth:`reset` on."""
+        super().set_plant(plant)
+        self.sim.plant = plant
+
     # -- helpers ------------------------------------------------------------------------
     def _observation(self) -> NDArray[np.float32]:
         kappa, _ = self.sim.table.lookup(self.sim.s)
-        values = self._base_observation(self.sim.camera, self.sim.t, self.sim._speed(self.sim.t)[0], kappa, self.sim.last_delta)
+        values = self._base_observation(self.sim.camera, self.sim.t, self.sim.speed_at(self.sim.t)[0], kappa, self.sim.last_delta)
         return self._clip_observation(values)
 
     def _info_now(self) -> dict[str, Any]:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import fields
+from typing import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -42,11 +43,42 @@ __all__ = [
     "true_cornering_stiffness",
     "tire_lateral_force",
     "equivalent_bicycle",
+    "register_closed_loop_references",
     "WHEELS",
 ]
 
 WHEELS = ("lf", "rf", "lr", "rr")
 _G = 9.81  # CommonRoad's gravity [m/s^2]
+
+#: The closed-loop (quasi-steady) references behind ``reference="effective"``: they drive this
+#: plant with the simulator's driver and camera, a layer above the plant, so :mod:`.simulate`
+#: registers them on import (the package imports it) instead of the plant importing it.
+_CLOSED_LOOP_REFERENCES: dict[str, Callable] = {}
+
+
+def register_closed_loop_references(
+    cornering_stiffness: Callable[[MultiBodyParams, HighOrderConfig], tuple[float, float]],
+    axle_curves: Callable[..., dict],
+) -> None:
+    """Set the functions :class:`MultiBodyPlant` uses for ``reference="effective"``.
+
+    Parameters
+    ----------
+    cornering_stiffness : callable
+        ``(params, config) -> (C_f, C_r)`` [N/rad] (:func:`~.simulate.effective_cornering_stiffness`).
+    axle_curves : callable
+        ``(params, config, ay_max=, count=) -> dict`` of ``alpha_f, alpha_r`` [rad], ``Fyf, Fyr`` [N]
+        (:func:`~.simulate.steady_state_axle_curves`).
+    """
+    _CLOSED_LOOP_REFERENCES.update(cornering_stiffness=cornering_stiffness, axle_curves=axle_curves)
+
+
+def _closed_loop_reference(name: str) -> Callable:
+    if name not in _CLOSED_LOOP_REFERENCES:
+        raise RuntimeError(
+            "the effective references need tire_learning_env.high_order.simulate; import tire_learning_env.high_order"
+        )
+    return _CLOSED_LOOP_REFERENCES[name]
 
 
 def parameter_vector(params: MultiBodyParams, config: HighOrderConfig) -> NDArray:
@@ -402,16 +434,12 @@ class MultiBodyPlant:
         if reference != "effective":
             raise ParameterError(f"reference must be 'tire' or 'effective', got {reference!r}")
         if self._effective_stiffness is None:
-            from .simulate import effective_cornering_stiffness
-
-            self._effective_stiffness = effective_cornering_stiffness(self.params, self.config)
+            self._effective_stiffness = _closed_loop_reference("cornering_stiffness")(self.params, self.config)
         return self._effective_stiffness
 
     def _effective_points(self, axle: str) -> tuple[NDArray, NDArray]:
         if self._effective_curves is None:
-            from .simulate import steady_state_axle_curves
-
-            self._effective_curves = steady_state_axle_curves(self.params, self.config, ay_max=6.0, count=12)
+            self._effective_curves = _closed_loop_reference("axle_curves")(self.params, self.config, ay_max=6.0, count=12)
         c = self._effective_curves
         key = "f" if axle == "front" else "r"
         order = np.argsort(c["alpha_" + key])

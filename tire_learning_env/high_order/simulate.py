@@ -18,7 +18,7 @@ from ..params import CameraParams
 from ..roads import PiecewiseCurvatureRoad, Road, make_road
 from ..simulation import SimulationLog, simulate
 from .params import HighOrderConfig, MultiBodyParams
-from .plant import MultiBodyPlant
+from .plant import MultiBodyPlant, register_closed_loop_references
 
 __all__ = ["simulate_high_order", "steady_state_cornering", "effective_cornering_stiffness", "steady_state_axle_curves"]
 
@@ -123,3 +123,6 @@ def steady_state_axle_curves(
             rows.append(steady_state_cornering(sign * vx * vx / ay, params, config))
     rows.sort(key=lambda r: r["ay"])
     return {k: np.array([r[k] for r in rows]) for k in ("ay", "alpha_f", "alpha_r", "Fyf", "Fyr")}
+
+
+register_closed_loop_references(effective_cornering_stiffness, steady_state_axle_curves)

@@ -481,9 +481,8 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         The observer running inside a tire-learning env.
     config : ExcitationConfig or dict, optional
     randomization : TruthRandomization or dict, optional
-        Per-episode truth tires (``None``: the env's own fixed truth). Needs a base env
-        that reads its truth through a ``plant`` attribute (and ``sim.plant`` if it has a
-        :class:`~tire_learning_env.simulation.Simulator`), as both base envs do.
+        Per-episode truth tires (``None``: the env's own fixed truth), handed to the base env
+        through its ``set_plant`` (:class:`~tire_learning_env.envs._base.TireLearningEnv`).
     record : bool
         Keep per-step records for :meth:`episode_metrics` (weights, slips, limits).
     info_logs : bool
@@ -592,9 +591,7 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             self.truth_draw = self.randomization.draw(self._truth_rng)
             base = self.env.unwrapped
             plant = self.randomization.build_plant(self.vehicle, self.truth_draw, getattr(base.plant, "effects", None))
-            base.plant = plant  # the env reads its truth through this reference (and its Simulator's)
-            if hasattr(base, "sim"):
-                base.sim.plant = plant
+            base.set_plant(plant)
         obs, info = self.env.reset(seed=seed, options=options)
         self._p0_diag = np.diag(self.target_covariance()).copy()
         self._j0 = self._j = self.information()
