@@ -35,15 +35,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", dest="batch_out", type=str, required=True, metavar="DIR",
                    help="batch folder DIR; an earlier batch of the same command there is resumed "
                    "(--overwrite starts over)")  # fmt: skip
-    p.add_argument("--command", choices=["estimate", "discrepancy"], default="estimate", help="command run on each log")
+    p.add_argument("--command", dest="batch_command", choices=["estimate", "discrepancy"], default="estimate",
+                   help="command run on each log")  # dest: 'command' is the CLI's subcommand name
     p.add_argument("--workers", type=_positive_int, default=None,
                    help="CPUs of the local Ray instance = logs run at once (default: all cores); ignored with --address")
     p.add_argument("--address", default=None,
                    help="join an existing Ray cluster (auto, HOST:PORT or ray://HOST:10001) instead of starting a "
                    "local one; every node needs this package and read access to the logs and DIR (docs/fleet.md)")
     p.add_argument("--args", dest="command_args", default="",
-                   help="extra arguments for the command on each log, as one quoted string, e.g. "
-                   "--args '--vehicle car.json --sensors imu' or --args '--tire linear'")
+                   help="extra arguments for the command on each log, as one quoted string after '=', e.g. "
+                   "--args='--vehicle car.json --sensors imu' or --args='--tire linear' (the '=' keeps a leading "
+                   "'--' from being read as a batch option)")
     p.add_argument("--channel-map", type=Path, default=None,
                    help="channel map (YAML/JSON) for MF4/Parquet/MCAP logs that have no <stem>.channels.yaml beside them")
     p.add_argument("--serial", action="store_true", help="run in this process without Ray (debugging)")
@@ -63,11 +65,11 @@ def run(args: argparse.Namespace) -> int:
 
     extra = shlex.split(args.command_args)
     if args.seed is not None:
-        if args.command == "discrepancy":
+        if args.batch_command == "discrepancy":
             extra += ["--seed", str(args.seed)]
     try:
         result = run_batch(
-            args.logs, Path(args.batch_out), args.command, workers=args.workers, address=args.address, args=extra,
+            args.logs, Path(args.batch_out), args.batch_command, workers=args.workers, address=args.address, args=extra,
             channel_map=args.channel_map, check_units=not args.no_unit_checks, overwrite=bool(args.overwrite),
             engine="serial" if args.serial else "ray", progress=not args.no_progress, max_retries=args.retries,
         )  # fmt: skip

@@ -1,0 +1,228 @@
+"""The Ray runner and ``tire-learning batch``: failures as rows, streaming, resume, worker/node death."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ray = pytest.importorskip("ray")
+pytest.importorskip("pyarrow")
+
+from tire_learning_env.cli import main  # noqa: E402
+from tire_learning_env.fleet import ResultStore, run_items  # noqa: E402
+from tire_learning_env.fleet.batch import expand_logs, output_names  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """One local Ray instance (2 CPUs, no dashboard) for the module; run_items uses it and leaves it running."""
+    from tire_learning_env.fleet import THREAD_ENV
+
+    # the workers import this test module to unpickle its functions: put tests/ on their path
+    env = dict(THREAD_ENV, PYTHONPATH=os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")]))
+    if not ray.is_initialized():
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False,
+                 object_store_memory=128 * 1024**2, runtime_env={"env_vars": env})  # fmt: skip
+    yield
+    ray.shutdown()
+
+
+def _square(x):
+    if x == 3:
+        raise ValueError("item 3 is corrupt\n(second line)")
+    return {"x": x, "square": x * x, "pid": os.getpid()}
+
+
+def test_run_items_failure_is_a_row_and_resume_skips_done(local_ray, tmp_path):
+    store = tmp_path / "store.jsonl"
+    seen = []
+    res = run_items(_square, list(range(6)), store=store, workers=2, progress=False, on_result=seen.append)
+    assert [r.key for r in res] == [str(i) for i in range(6)]
+    assert [r.status for r in res] == ["ok", "ok", "ok", "failed", "ok", "ok"]
+    assert res[3].error == "ValueError: item 3 is corrupt (second line)" and res[3].result is None
+    assert [r.result["square"] for r in res if r.status == "ok"] == [0, 1, 4, 16, 25]
+    assert len({r.result["pid"] for r in res if r.status == "ok"}) == 2  # two Ray workers shared the items
+    assert sorted(r.key for r in seen) == [str(i) for i in range(6)]
+    assert len(store.read_text().splitlines()) == 6
+    # re-run: done items are skipped with their stored result; the failed one runs again
+    res2 = run_items(_square, list(range(6)), store=store, workers=2, progress=False)
+    assert [r.status for r in res2] == ["skipped", "skipped", "skipped", "failed", "skipped", "skipped"]
+    assert res2[4].result["square"] == 16
+    # a changed fingerprint re-runs the item
+    res3 = run_items(_square, list(range(6)), store=store, fingerprints=["a"] + [""] * 5, engine="serial", progress=False)
+    assert res3[0].status == "ok" and res3[1].status == "skipped"
+
+
+def _die_once(arg):
+    marker, how = arg
+    if how == "always" or not os.path.exists(marker):
+        Path(marker).write_text("died")
+        os._exit(1)  # the worker process dies, as if killed
+    return "survived"
+
+
+def test_dead_worker_is_retried_then_recorded(local_ray, tmp_path):
+    items = [(str(tmp_path / "a"), "once"), (str(tmp_path / "b"), "always")]
+    res = run_items(_die_once, items, store=tmp_path / "s.jsonl", max_retries=1, progress=False)
+    assert res[0].status == "ok" and res[0].result == "survived"
+    assert res[1].status == "failed" and "worker or node lost after 2 attempts" in res[1].error
+    assert len(ResultStore(tmp_path / "s.jsonl").load()) == 2
+
+
+def test_store_ignores_a_line_cut_by_a_kill(tmp_path):
+    store = ResultStore(tmp_path / "s.jsonl")
+    res = run_items(lambda x: x + 1, [1, 2], store=store, engine="serial", progress=False)
+    store.close()
+    with open(tmp_path / "s.jsonl", "a") as fh:
+        fh.write('{"key": "2", "status": "ok", "res')  # a kill in the middle of a write
+    loaded = ResultStore(tmp_path / "s.jsonl").load()
+    assert sorted(loaded) == ["0", "1"] and loaded["1"].result == 3
+    res = run_items(lambda x: x + 1, [1, 2, 3], store=tmp_path / "s.jsonl", engine="serial", progress=False)
+    assert [r.status for r in res] == ["skipped", "skipped", "ok"]
+    assert len(ResultStore(tmp_path / "s.jsonl").load()) == 3
+    with pytest.raises(Exception, match="duplicate item keys"):
+        run_items(lambda x: x, [1, 2], keys=["a", "a"], engine="serial")
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    """Two tiny camera logs (CSV and Parquet) and two broken ones (bad cell, junk MF4)."""
+    from tire_learning_env.formats import write_logger_log
+    from tire_learning_env.io import write_log
+    from tire_learning_env.params import CameraParams
+    from tire_learning_env.simulation import simulate
+
+    folder = tmp_path_factory.mktemp("fleet")
+    (folder / "car_b").mkdir()
+    for seed, path in ((1, folder / "drive.csv"), (2, folder / "car_b" / "drive.parquet")):
+        log = simulate("study1", 8.0, camera=CameraParams.paper_noise(rate=20.0), physics_rate=1000.0, seed=seed)
+        cols = log.to_columns()
+        keep = np.zeros(len(cols["t"]), dtype=bool)
+        keep[::20] = True
+        keep |= np.isfinite(cols["e1"])
+        cols = {k: v[keep] for k, v in cols.items()}
+        if path.suffix == ".csv":
+            write_log(path, cols)
+        else:
+            write_logger_log(path, cols, channel_map=path.with_name("drive.channels.yaml"))
+    (folder / "broken.csv").write_text("t,vx,delta,kappa,e1,e2\n0,20,0,0,0,0\n0.1,20,x,0,0,0\n")
+    (folder / "junk.mf4").write_bytes(b"\x00not an MDF file" * 50)
+    return folder
+
+
+def _summary(out: Path) -> dict[str, dict]:
+    with open(out / "summary.csv", newline="") as fh:
+        return {row["name"]: row for row in csv.DictReader(fh)}
+
+
+def test_batch_on_local_ray_with_broken_logs_and_resume(local_ray, fleet, tmp_path, capsys):
+    out = tmp_path / "batch"
+    argv = ["batch", str(fleet), "--out", str(out), "--workers", "2", "--no-progress", "--args=--sensors camera"]
+    assert main(argv) == 1  # a log failed: exit code 1, every other log finished
+    rows = _summary(out)
+    # the same stem in two folders: each named <folder>__<stem>
+    assert set(rows) == {"broken", "junk", f"{fleet.name}__drive", "car_b__drive"}
+    ok = {k: r for k, r in rows.items() if k.endswith("drive")}
+    assert all(r["status"] == "ok" and r["error"] == "" for r in ok.values())
+    assert rows["broken"]["status"] == "failed" and "column 'delta', line 3: 'x' is not a number" in rows["broken"]["error"]
+    assert rows["junk"]["status"] == "failed" and "not a readable MF4 file" in rows["junk"]["error"]
+    for name, r in ok.items():
+        assert r["kind"] == "camera" and r["verdict"]
+        k, lo, hi = (float(r[f"stiffness_front{s}_N_per_rad"]) for s in ("", "_lo", "_hi"))
+        assert lo < k < hi and 5e4 < k < 2e5
+        assert 0 <= float(r["curve_nrmse_front"]) < 1.0  # the simulated logs carry truth
+        folder = out / name
+        assert {"metrics.json", "estimates.csv", "tire_curves.csv", "tire_curves.png",
+                ".tire_learning_manifest.json"} <= {p.name for p in folder.iterdir()}  # fmt: skip
+        metrics = json.loads((folder / "metrics.json").read_text())
+        assert metrics["summary"]["stiffness_front_N_per_rad"] == pytest.approx(k, rel=1e-5)
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(out / "summary.parquet").to_pydict()
+    assert sorted(table["name"]) == sorted(rows)
+    assert (out / "fleet.png").stat().st_size > 1000
+    assert "failed: broken" in capsys.readouterr().err
+    first = {k: r["stiffness_front_N_per_rad"] for k, r in ok.items()}
+
+    # re-run: the done logs are skipped (their figures kept), the failed ones run again
+    assert main(argv) == 1
+    rows = _summary(out)
+    assert {k: r["status"] for k, r in rows.items() if k.endswith("drive")} == dict.fromkeys(ok, "skipped")
+    assert {k: r["stiffness_front_N_per_rad"] for k, r in rows.items() if k.endswith("drive")} == first
+    assert rows["broken"]["status"] == "failed"
+
+    # a batch folder of another command is refused in one line
+    assert main(["batch", str(fleet / "drive.csv"), "--out", str(out), "--command", "discrepancy"]) == 2
+    assert "holds a batch of 'estimate'" in capsys.readouterr().err
+
+
+def test_killed_batch_loses_no_finished_row(fleet, tmp_path):
+    """SIGKILL the batch command after its first result: that row is on disk and is not re-run."""
+    out = tmp_path / "killed"
+    logs = [str(fleet / "drive.csv"), str(fleet / "broken.csv"), str(fleet / "junk.mf4")]  # serial: in this order
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    proc = subprocess.Popen([sys.executable, "-m", "tire_learning_env.cli", "batch", *logs, "--out", str(out),
+                             "--serial", "--no-progress", "--args=--sensors camera"],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    store = out / "batch_results.jsonl"
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        if store.exists() and len(store.read_text().splitlines()) >= 1:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    finished = ResultStore(store).load()
+    assert finished["drive"].status == "ok"
+    rows = _summary(out)
+    assert set(finished) <= set(rows)  # every finished result is also a row of summary.csv
+    assert main(["batch", *logs, "--out", str(out), "--serial", "--no-progress", "--args=--sensors camera"]) == 1
+    rows = _summary(out)
+    assert set(rows) == {"broken", "junk", "drive"}
+    assert rows["drive"]["status"] == "skipped"  # finished before the kill: not run again
+    assert rows["broken"]["status"] == "failed"
+
+
+def test_batch_errors_are_one_line(tmp_path, capsys):
+    assert main(["batch", str(tmp_path / "nope.csv"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"tire-learning batch: error: no such log or folder: {tmp_path / 'nope.csv'}"
+    (tmp_path / "a.csv").write_text("t\n")
+    assert main(["batch", str(tmp_path / "a.csv"), "--out", str(tmp_path / "o"), "--args=--tire linear"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "not valid for estimate" in err and "--tire" in err
+
+
+def test_expand_logs_and_names(tmp_path):
+    for p in ("a/x.csv", "b/x.mf4", "b/y.parquet", "b/.hidden/z.csv", "c/notes.txt"):
+        (tmp_path / p).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / p).write_text("")
+    logs = expand_logs([tmp_path / "a", str(tmp_path / "b" / "*.parquet"), tmp_path / "b"])
+    assert [p.relative_to(tmp_path).as_posix() for p in logs] == ["a/x.csv", "b/y.parquet", "b/x.mf4"]
+    assert output_names(logs) == ["a__x", "y", "b__x"]
+    with pytest.raises(Exception, match="holds no log"):
+        expand_logs([tmp_path / "c"])
+
+
+@pytest.mark.slow
+def test_multi_node_kill_loses_no_result(tmp_path):
+    """Three raylets on one machine (ray.cluster_utils.Cluster); a worker node is killed mid-batch."""
+    code = ("import json, sys; from tire_learning_env.fleet.cluster import kill_node_run; "
+            "print('RESULT' + json.dumps(kill_node_run(sys.argv[1], n_items=10, task_s=1.0)))")  # fmt: skip
+    proc = subprocess.run([sys.executable, "-c", code, str(tmp_path / "store.jsonl")], capture_output=True, text=True,
+                          timeout=600, env=dict(os.environ, OMP_NUM_THREADS="1"))  # fmt: skip
+    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT")]
+    assert line, proc.stderr[-2000:]
+    r = json.loads(line[0][6:])
+    assert r["killed"] and r["recorded_before_kill"] >= 3
+    assert r["lost"] == 0 and r["ok"] == 10 and r["failed"] == 0 and r["stored_records"] == 10
+    assert r["results_after_kill_from_killed_node"] == 0  # the dead node's unfinished tasks ran elsewhere
