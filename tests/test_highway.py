@@ -1,6 +1,9 @@
-"""highway-env traffic scenes with the truth vehicle as the ego car (envs/highway.py)."""
+"""highway-env traffic scenes with the truth vehicle as the ego car (envs/highway*.py)."""
 
+import importlib.util
 import math
+import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -438,7 +441,7 @@ def test_render_rgb_array_headless(env_id):
 def test_episode_saved_as_gif(tmp_path):
     from PIL import Image
 
-    from tire_learning_env.envs.highway_record import record_episode
+    from tire_learning_env.rendering import record_episode
 
     out = record_episode("TireLearning-Highway-v0", tmp_path / "ep.gif", seconds=0.5, seed=1, config={"vehicles_count": 5})
     assert out["frames"] == 11
@@ -476,7 +479,12 @@ def test_estimator_wrapper_runs_unchanged(env_id):
 
 @pytest.mark.slow
 def test_dense_traffic_five_minutes_twenty_seeds_without_collision_or_departure():
-    from tire_learning_env.envs.highway_endurance import endurance
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_highway_endurance.py"
+    spec = importlib.util.spec_from_file_location("bench_highway_endurance", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # the worker processes unpickle run_seed by module name
+    spec.loader.exec_module(module)
+    endurance = module.endurance
 
     result = endurance(seeds=20, seconds=300.0, workers=2)
     assert result["completed"] == 20, result

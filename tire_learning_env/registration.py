@@ -14,9 +14,9 @@ ENV_IDS: dict[str, tuple[str, dict, int]] = {
     # excitation task: steer to excite the slip range the observer still has to learn (wrappers/excitation.py)
     "TireLearning-Excitation-v0": ("tire_learning_env.wrappers.excitation:make_excitation_env", {}, 1200),
     "TireLearning-HighwayExcitation-v0": ("tire_learning_env.wrappers.excitation:make_highway_excitation_env", {}, 1200),
-    # highway-env traffic scenes with the truth vehicle as the ego car (envs/highway.py)
-    "TireLearning-Highway-v0": ("tire_learning_env.envs.highway:HighwayTrafficEnv", {}, 1200),
-    "TireLearning-Racetrack-v0": ("tire_learning_env.envs.highway:RacetrackTrafficEnv", {}, 1200),
+    # highway-env traffic scenes with the truth vehicle as the ego car (envs/highway.py, envs/highway_scenes.py)
+    "TireLearning-Highway-v0": ("tire_learning_env.envs.highway_scenes:HighwayTrafficEnv", {}, 1200),
+    "TireLearning-Racetrack-v0": ("tire_learning_env.envs.highway_scenes:RacetrackTrafficEnv", {}, 1200),
     # high-order truth vehicle (CommonRoad multi-body model), see tire_learning_env.high_order
     "TireLearning-HighOrderCornering-v0": ("tire_learning_env.envs.high_order:HighOrderLaneKeepingEnv", {"road": "study1"}, 1200),
     "TireLearning-HighOrderLaneChange-v0": ("tire_learning_env.envs.high_order:HighOrderLaneKeepingEnv", {"road": "lane_changes"}, 1200),

@@ -1,15 +1,21 @@
-"""Headless top-down picture of road, lane and car as an RGB array (numpy only)."""
+"""Headless pictures: a top-down view of road, lane and car as an RGB array (numpy only), and
+an env episode saved as an animated GIF (:func:`record_episode`, frames from ``env.render()``;
+command line: ``examples/record_episode.py``). For MP4 use ``gymnasium.wrappers.RecordVideo``
+(it needs ``moviepy``, not a dependency of this package)."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
+from typing import Callable
 
 import numpy as np
+from gymnasium.spaces import Discrete
 from numpy.typing import NDArray
 
 from .roads import Road
 
-__all__ = ["TopDownRenderer"]
+__all__ = ["TopDownRenderer", "record_episode", "save_gif"]
 
 _GRASS = np.array([96, 150, 72], dtype=np.uint8)
 _ASPHALT = np.array([90, 90, 96], dtype=np.uint8)
@@ -79,3 +85,80 @@ class TopDownRenderer:
         across = -dx * math.sin(car_h) + dy * math.cos(car_h)
         img[(np.abs(along) < vehicle_length / 2) & (np.abs(across) < vehicle_width / 2)] = _CAR
         return img
+
+
+def save_gif(frames: list[NDArray], path: str | Path, fps: float) -> Path:
+    """Write RGB frames (H, W, 3) uint8 to an animated GIF played at ``fps`` [1/s]."""
+    from PIL import Image
+
+    if not frames:
+        raise ValueError("no frames to save")
+    path = Path(path)
+    images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
+    duration = max(int(round(1000.0 / fps)), 20)  # [ms]; GIF viewers clamp below 20 ms
+    images[0].save(path, save_all=True, append_images=images[1:], duration=duration, loop=0, optimize=False)
+    return path
+
+
+def record_episode(
+    env: gym.Env | str,
+    path: str | Path,
+    seconds: float = 20.0,
+    seed: int | None = 0,
+    policy: Callable[[NDArray], object] | None = None,
+    every: int = 1,
+    **make_kwargs,
+) -> dict:
+    """Run an episode, render every ``every``-th policy step and save it as a GIF.
+
+    Parameters
+    ----------
+    env : gymnasium.Env or str
+        An env created with ``render_mode="rgb_array"``, or a registered id (then created
+        with ``make_kwargs``).
+    path : str or Path
+        Output ``.gif`` file.
+    seconds : float
+        Simulated time to record [s] (stops earlier if the episode ends).
+    seed : int, optional
+        Reset seed.
+    policy : callable, optional
+        ``obs -> action``; default: the zero steering offset (the built-in driver alone),
+        or "keep lane" for a discrete action space.
+    every : int
+        Keep one frame every ``every`` policy steps (the GIF plays in real time).
+
+    Returns
+    -------
+    dict
+        ``path``, ``frames``, ``simulated_s``, ``terminated``, ``truncated``.
+    """
+    if isinstance(env, str):
+        import gymnasium as gym
+
+        env = gym.make(env, render_mode="rgb_array", **make_kwargs)
+    if env.render_mode != "rgb_array":
+        raise ValueError("record_episode needs an env created with render_mode='rgb_array'")
+    if policy is None:
+        space = env.action_space
+        zero = 0 if isinstance(space, Discrete) else np.zeros(space.shape, dtype=space.dtype)
+        policy = lambda obs: zero  # noqa: E731
+    rate = float(env.unwrapped.policy_rate)
+    obs, _ = env.reset(seed=seed)
+    frames = [env.render()]
+    terminated = truncated = False
+    n_steps = int(round(seconds * rate))
+    for k in range(n_steps):
+        obs, _, terminated, truncated, _ = env.step(policy(obs))
+        if (k + 1) % every == 0 or terminated or truncated:
+            frames.append(env.render())
+        if terminated or truncated:
+            break
+    save_gif(frames, path, fps=rate / every)
+    return {
+        "path": str(path),
+        "frames": len(frames),
+        "simulated_s": float(env.unwrapped.t),
+        "terminated": bool(terminated),
+        "truncated": bool(truncated),
+    }

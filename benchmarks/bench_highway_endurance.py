@@ -6,7 +6,7 @@ and IDM speed, in dense traffic (:data:`DENSE_TRAFFIC`), and prints JSON.
 
 Command line (about 5 to 10 minutes on 2 cores)::
 
-    python -m tire_learning_env.envs.highway_endurance --seeds 20 --minutes 5 --workers 2
+    python benchmarks/bench_highway_endurance.py --seeds 20 --minutes 5 --workers 2
 """
 
 from __future__ import annotations
