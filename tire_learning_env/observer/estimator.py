@@ -88,8 +88,11 @@ class ObserverConfig(_Params):
     initial_std, random_walk, max_std, prior_length, prior_symmetry, sensor_offsets
         Weight prior and adaptation (:class:`~.neuro_adaptive.AdaptationParams`).
     online_prior_length : float, optional
-        Prior length scale [deg] of the causal pass; default 0 with a camera, ``prior_length``
-        for IMU-only (:class:`~.neuro_adaptive.AdaptationParams` says why).
+        Prior length scale [deg] of the causal pass' ``"rls"`` law; default 0 with a camera,
+        ``prior_length`` for IMU-only (:class:`~.neuro_adaptive.AdaptationParams` says why).
+    causal_update, block_s
+        The causal pass' learning law and its block length [s]
+        (:class:`~.neuro_adaptive.AdaptationParams`).
     nis_factor : float
         Health test margin (:class:`~.neuro_adaptive.HealthParams`).
     identifiable_rel_2sigma : float
@@ -117,6 +120,8 @@ class ObserverConfig(_Params):
     prior_length: float = 1.0
     prior_symmetry: float = 0.8
     online_prior_length: float | None = None
+    causal_update: str = "block"
+    block_s: float = 2.0
     sensor_offsets: bool = True
     nis_factor: float = 3.0
     identifiable_rel_2sigma: float = 0.1
@@ -154,7 +159,7 @@ class ObserverConfig(_Params):
         return AdaptationParams(
             initial_std=self.initial_std, random_walk=self.random_walk, max_std=self.max_std,
             prior_length=self.prior_length, prior_symmetry=self.prior_symmetry, sensor_offsets=self.sensor_offsets,
-            online_prior_length=self.online_prior_length,
+            online_prior_length=self.online_prior_length, causal_update=self.causal_update, block_s=self.block_s,
         )  # fmt: skip
 
     def gain_design(self) -> GainDesign:

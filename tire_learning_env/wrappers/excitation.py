@@ -892,5 +892,8 @@ def _wrap(env_cls, defaults, env_kwargs, config, randomization, observer_config,
     cfg = coerce_params(ExcitationConfig, config, "config") or ExcitationConfig()
     base = env_cls(**{**defaults, **env_kwargs, "max_steering_offset": cfg.max_steering_offset})
     rnd = TruthRandomization() if randomization is True else (None if randomization is False else randomization)
-    est = EstimatorWrapper(base, config=observer_config, keep_history=keep_history)
+    # the reward (information gain of P_w) and the committed policies were designed and trained on the
+    # per-measurement law; the block law (AdaptationParams.causal_update, the default elsewhere) awaits a retraining
+    obs_cfg = observer_config if observer_config is not None else ObserverConfig(causal_update="rls")
+    est = EstimatorWrapper(base, config=obs_cfg, keep_history=keep_history)
     return ExcitationWrapper(est, config=cfg, randomization=rnd, record=record, info_logs=info_logs)
