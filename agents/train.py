@@ -17,6 +17,18 @@ Seeds: ``--seed S`` seeds torch/numpy (SB3 ``seed=S``) and the envs (env ``i`` i
 first with seed ``S + i``; later resets continue its random streams). Validation uses
 the seeds of the config (default 500-502), evaluation 1000-1009: neither is a training
 reset seed.
+
+Several seeds or configurations as Ray tasks (the ``fleet`` extra; docs/fleet.md)::
+
+    python agents/train.py --config agents/configs/ppo.json agents/configs/sac.json \
+        --seeds 0 1 2 --workers 2 --out runs/sweep
+
+trains every (config, seed) pair as one task of :func:`tire_learning_env.fleet.run_items`
+into ``--out/<config stem>_seed<S>/`` (the single-run files above) and records each
+finished run in ``--out/runs.jsonl``; ``--out/runs.csv`` lists them. Re-running the same
+command skips the runs already finished with an unchanged configuration, so a sweep
+killed half-way resumes where it stopped. ``--address`` joins a Ray cluster (every node
+needs this checkout at the same path); ``--serial`` runs the sweep without Ray.
 """
 
 from __future__ import annotations
@@ -192,11 +204,75 @@ def train(cfg: dict[str, Any], seed: int, out: Path, progress: bool = True, comm
     return run
 
 
+def _train_task(spec: dict[str, Any]) -> dict[str, Any]:
+    """One run of a sweep (a Ray task): train and return the headline of its ``run.json``."""
+    run = train(spec["cfg"], spec["seed"], Path(spec["out"]), progress=False, command=spec["command"])
+    val = run.get("validation") or {}
+    return {
+        "run": spec["name"], "config": spec["config"], "algo": run["algo"], "seed": run["seed"],
+        "timesteps": run["timesteps"], "wall_time_s": run["wall_time_s"], "train_steps_per_s": run["train_steps_per_s"],
+        "best_nrmse_max": val.get("best_nrmse_max"), "final_model": run["final_model"], "best_model": run["best_model"],
+        "out": spec["out"],
+    }  # fmt: skip
+
+
+def sweep(configs: list[Path], seeds: list[int], out: Path, overrides: dict[str, Any], command: str,
+          workers: int | None = None, address: str | None = None, serial: bool = False, progress: bool = True,
+          cpus_per_run: float = 1.0) -> list:  # fmt: skip
+    """Train every (config, seed) pair as a task of :func:`tire_learning_env.fleet.run_items`, resumably.
+
+    Returns the runner's :class:`~tire_learning_env.fleet.ItemResult` list (one per run) and
+    writes ``out/runs.jsonl`` (the resume state) and ``out/runs.csv``.
+    """
+    import csv
+    import hashlib
+    import io
+
+    from tire_learning_env.fleet import run_items
+    from tire_learning_env.io import atomic_write_text
+
+    specs, keys, prints = [], [], []
+    stems = [c.stem for c in configs]
+    for path in configs:
+        cfg = load_config(path, overrides)
+        stem = path.stem if stems.count(path.stem) == 1 else f"{path.parent.name}_{path.stem}"
+        for seed in seeds:
+            name = f"{stem}_seed{seed}"
+            specs.append({"cfg": cfg, "seed": seed, "out": str((out / name).resolve()), "name": name,
+                          "config": str(path), "command": command})  # fmt: skip
+            keys.append(name)
+            prints.append(hashlib.sha256(json.dumps([cfg, seed], sort_keys=True, default=str).encode()).hexdigest()[:16])
+    agents_dir = str(Path(__file__).resolve().parent)
+    pythonpath = os.pathsep.join(p for p in (agents_dir, os.environ.get("PYTHONPATH", "")) if p)
+    results = run_items(_train_task, specs, keys=keys, fingerprints=prints, store=out / "runs.jsonl", workers=workers,
+                        address=address, engine="serial" if serial else "ray", progress=progress, desc="runs",
+                        num_cpus_per_item=cpus_per_run,
+                        ray_init_kwargs={"runtime_env": {"env_vars": {"PYTHONPATH": pythonpath}}})  # fmt: skip
+    cols = ["run", "status", "error", "config", "algo", "seed", "timesteps", "wall_time_s", "train_steps_per_s",
+            "best_nrmse_max", "final_model", "best_model"]  # fmt: skip
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(cols)
+    for r in results:
+        row = {"run": r.key, "status": r.status, "error": r.error, **(r.result or {})}
+        w.writerow(["" if row.get(c) is None else row.get(c, "") for c in cols])
+    atomic_write_text(out / "runs.csv", buf.getvalue())
+    return results
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--config", type=Path, required=True, help="training configuration JSON (agents/configs/)")
+    parser.add_argument("--config", type=Path, nargs="+", required=True,
+                        help="training configuration JSON (agents/configs/); several = a sweep on Ray")
     parser.add_argument("--seed", type=int, default=0, help="training seed (torch, numpy, env resets)")
-    parser.add_argument("--out", type=Path, required=True, help="output directory")
+    parser.add_argument("--seeds", type=int, nargs="+", default=None,
+                        help="several training seeds: a sweep of every (config, seed) as Ray tasks, resumable")
+    parser.add_argument("--workers", type=int, default=None, help="sweep: runs at once on local Ray (default: all cores)")
+    parser.add_argument("--address", default=None, help="sweep: join this Ray cluster (auto, HOST:PORT)")
+    parser.add_argument("--serial", action="store_true", help="sweep: run in this process, without Ray")
+    parser.add_argument("--cpus-per-run", type=float, default=1.0, help="sweep: CPUs Ray reserves per run")
+    parser.add_argument("--out", type=Path, required=True,
+                        help="output directory (a sweep: one sub-folder per run, runs.jsonl, runs.csv)")
     parser.add_argument("--total-timesteps", type=int, default=None, help="override the config's total_timesteps")
     parser.add_argument("--no-validation", action="store_true", help="skip the periodic validation episodes")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (log to stdout instead)")
@@ -206,8 +282,19 @@ def main(argv: list[str] | None = None) -> int:
         overrides["total_timesteps"] = args.total_timesteps
     if args.no_validation:
         overrides["validate_every"] = 0
-    cfg = load_config(args.config, overrides)
     command = " ".join(shlex.quote(a) for a in ["python", "agents/train.py", *(argv if argv is not None else sys.argv[1:])])
+    if len(args.config) > 1 or args.seeds is not None:
+        results = sweep(args.config, args.seeds if args.seeds is not None else [args.seed], args.out, overrides, command,
+                        workers=args.workers, address=args.address, serial=args.serial, progress=not args.no_progress,
+                        cpus_per_run=args.cpus_per_run)  # fmt: skip
+        counts = {s: sum(r.status == s for r in results) for s in ("ok", "failed", "skipped")}
+        for r in results:
+            if r.status == "failed":
+                print(f"train: run {r.key} failed: {r.error}", file=sys.stderr)
+        print(f"{len(results)} runs: {counts['ok']} ok, {counts['failed']} failed, {counts['skipped']} skipped (done before)")
+        print(args.out / "runs.csv")
+        return 0 if not counts["failed"] else 1
+    cfg = load_config(args.config[0], overrides)
     run = train(cfg, args.seed, args.out, progress=not args.no_progress, command=command)
     print(
         f"{run['algo']}: {run['timesteps']} steps in {run['wall_time_s']:.1f} s "

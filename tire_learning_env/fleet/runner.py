@@ -212,7 +212,10 @@ def _start_ray(workers: int | None, address: str | None, ray_init_kwargs: dict |
     else:
         kwargs["num_cpus"] = int(workers or os.cpu_count() or 1)
         kwargs["object_store_memory"] = 128 * 1024**2
-    kwargs.update(ray_init_kwargs or {})
+    extra = dict(ray_init_kwargs or {})
+    env_vars = dict(extra.pop("runtime_env", {}) or {})
+    kwargs["runtime_env"] = {**env_vars, "env_vars": {**THREAD_ENV, **env_vars.get("env_vars", {})}}
+    kwargs.update(extra)
     try:
         ray.init(**kwargs)
     except Exception as exc:  # noqa: BLE001 - e.g. no cluster at address
@@ -273,7 +276,8 @@ def run_items(
         Called in this process with every :class:`ItemResult` as it finishes (after it is
         stored), in completion order; skipped items first.
     ray_init_kwargs : dict, optional
-        Extra keywords for ``ray.init`` (local start only).
+        Extra keywords for ``ray.init`` when the runner starts or joins Ray; ``runtime_env``
+        ``env_vars`` are added to :data:`THREAD_ENV` (e.g. a ``PYTHONPATH`` for the workers).
 
     Returns
     -------
