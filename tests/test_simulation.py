@@ -99,3 +99,49 @@ def test_blow_up_raises_with_time_and_state():
     sim.reset(np.random.default_rng(0), xi0=[0.0, 1e308, 0.0, 1e308])
     with pytest.raises(FloatingPointError, match=r"t=0\.0000 s"):
         sim.advance(5)
+
+
+def test_log_rows_have_one_named_index_per_column():
+    """The loops write rows through ``LOG_*`` names (``record_tick``); each name is its column."""
+    from tire_learning_env import _kernels as K
+
+    assert [getattr(K, "LOG_" + name.upper()) for name in K.LOG_COLUMNS] == list(range(K.N_LOG))
+    assert K.LOG_INDEX == {name: i for i, name in enumerate(K.LOG_COLUMNS)}
+    values = dict(t=1.0, delta=2.0, vx=3.0, ax=4.0, kappa=5.0, psi_dot_des=6.0, psi_ddot_des=7.0, e1=8.0, e2=9.0,
+                  yaw_rate=10.0, ay=11.0, true_e1=12.0, true_e1_dot=13.0, true_e2=14.0, true_e2_dot=15.0,
+                  alpha_f=16.0, alpha_r=17.0, Fyf=18.0, Fyr=19.0, s=20.0)  # fmt: skip
+    for delivered in (True, False):
+        out = np.full((2, K.N_LOG), -1.0)
+        K.record_true_state(out, 1, np.array([values[k] for k in ("true_e1", "true_e1_dot", "true_e2", "true_e2_dot")] + [0.0, 0.0]))
+        K.record_tick(out, 1, *(values[k] for k in ("t", "delta", "vx", "ax", "kappa", "psi_dot_des", "psi_ddot_des")),
+                      delivered, values["e1"], values["e2"],
+                      *(values[k] for k in ("yaw_rate", "ay", "alpha_f", "alpha_r", "Fyf", "Fyr", "s")))  # fmt: skip
+        row = dict(zip(K.LOG_COLUMNS, out[1]))
+        assert np.all(out[0] == -1.0)
+        if not delivered:  # no frame delivered: NaN camera columns
+            assert np.isnan(row.pop("e1")) and np.isnan(row.pop("e2"))
+        assert row == {k: values[k] for k in row}
+
+
+def test_speed_profile_runs_keep_their_midpoint_lookup():
+    """The base simulator's speed-profile runs look the RK4 midpoint curvature up at s + vx dt/2
+    (``midpoint_ax_factor=0``), the compiled loop at the exact s + vx dt/2 + ax dt^2/8: the two
+    differ by that term only, so the logs agree closely but not to the bit."""
+    import math
+
+    from tire_learning_env.simulation import advance_ticks_python
+
+    v = VehicleParams()
+    profile = lambda t: (30.0 + 3.0 * math.sin(0.5 * t), 1.5 * math.cos(0.5 * t))  # noqa: E731
+    logs = {}
+    for factor in (0.0, 0.125):
+        sim = Simulator(BicyclePlant(v, *axle_tires(v)), make_road("sine"), CameraParams(), DriverParams())
+        sim.reset(np.random.default_rng(0))
+        out = np.empty((3000, 20))
+        advance_ticks_python(3000, sim.dt, 0, sim.plant, 0.0, 30.0, 1.5, sim.table.lookup, sim.camera, sim.driver,
+                             0.0, math.nan, 0.0, out, speed_profile=profile, midpoint_ax_factor=factor)  # fmt: skip
+        logs[factor] = out
+    assert not np.array_equal(logs[0.0], logs[0.125], equal_nan=True)
+    np.testing.assert_allclose(logs[0.0], logs[0.125], rtol=1e-6, atol=1e-5)  # forces [N] of order 1e3
+    a = simulate("sine", 3.0, speed_profile=profile)
+    np.testing.assert_array_equal(a.truth["true_state"], logs[0.0][:, 11:15])

@@ -9,12 +9,18 @@ implementation of
 - the lane-keeping driver (:func:`driver_steer`),
 - the road-table lookup (:func:`road_lookup`),
 
-and :func:`advance_bicycle` strings them together for a whole chunk of ticks, which is
-what makes the environments fast. :class:`~tire_learning_env.simulation.Simulator`
-runs the same sequence in Python for any other plant; a test checks both give the
-same log.
+- the two curvature sources of the tick loop: a road table on a uniform grid
+  (:func:`road_lookup`) and the piecewise-linear knots of a highway-env lane
+  (:func:`knot_lookup`, :func:`preview_curvature`), plus a lane change's reference path
+  (:func:`lane_change_reference`),
 
-Array layouts are named by the ``V_*``, ``T_*``, ``X_*``, ``CAM_*`` and ``DRV_*`` indices.
+and :func:`advance_ticks`, the one compiled tick loop, strings them together for a whole
+chunk of ticks, which is what makes the environments fast (the base simulator passes its
+road table, the highway ego its lane knots, a lane-change path and a stop point).
+:func:`tire_learning_env.simulation.advance_ticks_python` runs the same sequence in Python
+for any other plant; tests check both give the same log.
+
+Array layouts are named by the ``V_*``, ``T_*``, ``X_*``, ``CAM_*``, ``DRV_*`` and ``LOG_*`` indices.
 """
 
 from __future__ import annotations
@@ -60,6 +66,17 @@ LOG_COLUMNS = (
     "true_e1", "true_e1_dot", "true_e2", "true_e2_dot", "alpha_f", "alpha_r", "Fyf", "Fyr", "s",
 )  # fmt: skip
 N_LOG = len(LOG_COLUMNS)
+(
+    LOG_T, LOG_DELTA, LOG_VX, LOG_AX, LOG_KAPPA, LOG_PSI_DOT_DES, LOG_PSI_DDOT_DES, LOG_E1, LOG_E2,
+    LOG_YAW_RATE, LOG_AY, LOG_TRUE_E1, LOG_TRUE_E1_DOT, LOG_TRUE_E2, LOG_TRUE_E2_DOT,
+    LOG_ALPHA_F, LOG_ALPHA_R, LOG_FYF, LOG_FYR, LOG_S,
+) = range(N_LOG)  # fmt: skip
+#: Column of each :data:`LOG_COLUMNS` name.
+LOG_INDEX = {name: i for i, name in enumerate(LOG_COLUMNS)}
+# curvature source of the tick loop (advance_ticks): a road table or lane knots
+CURVATURE_TABLE, CURVATURE_KNOTS = 0, 1
+# why the tick loop returned: all ticks done, hand-over point reached, state not finite
+STOP_DONE, STOP_HANDOVER, STOP_BLOWUP = 0, 1, 2
 _GRAVITY = 9.81
 _EPS = 1e-9
 
@@ -150,7 +167,7 @@ def bicycle_rk4_step(state, delta, dt, p0, p1, p2, q0, q1, q2, vx, ax, veh, tf, 
     return af, ar, Fyf, Fyr, e2d + p0, (Fyf + Fyr + eff[X_WIND_F]) / veh[V_M]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def road_lookup(s, kappa, dkappa, ds):
     """``(kappa, dkappa/ds)`` at ``s`` by linear interpolation in a table with spacing ``ds``."""
     x = s / ds
@@ -257,54 +274,218 @@ def guard_steering(delta, delta_prev, guard):
 
 
 @njit(cache=True, inline="always")
+def record_true_state(out, j, state):
+    """Write the true error state ``state[:4]`` (before the step) into row ``j`` of a tick log."""
+    out[j, LOG_TRUE_E1] = state[0]
+    out[j, LOG_TRUE_E1_DOT] = state[1]
+    out[j, LOG_TRUE_E2] = state[2]
+    out[j, LOG_TRUE_E2_DOT] = state[3]
+
+
+@njit(cache=True, inline="always")
 def record_tick(out, j, t, delta, vx, ax, kappa, p0, q0, delivered, f1, f2, r, ay, af, ar, Fyf, Fyr, s):
-    """Fill row ``j`` of a tick log (:data:`LOG_COLUMNS`) except the true state (columns 11-14,
-    written before the step); camera columns are NaN when no frame was delivered."""
-    out[j, 0] = t
-    out[j, 1] = delta
-    out[j, 2] = vx
-    out[j, 3] = ax
-    out[j, 4] = kappa
-    out[j, 5] = p0
-    out[j, 6] = q0
-    out[j, 7] = f1 if delivered else math.nan
-    out[j, 8] = f2 if delivered else math.nan
-    out[j, 9] = r
-    out[j, 10] = ay
-    out[j, 15] = af
-    out[j, 16] = ar
-    out[j, 17] = Fyf
-    out[j, 18] = Fyr
-    out[j, 19] = s
+    """Fill row ``j`` of a tick log (:data:`LOG_COLUMNS`) except the true state (written before
+    the step, :func:`record_true_state`); camera columns are NaN when no frame was delivered.
+    The one row writer of the compiled and the Python tick loops."""
+    out[j, LOG_T] = t
+    out[j, LOG_DELTA] = delta
+    out[j, LOG_VX] = vx
+    out[j, LOG_AX] = ax
+    out[j, LOG_KAPPA] = kappa
+    out[j, LOG_PSI_DOT_DES] = p0
+    out[j, LOG_PSI_DDOT_DES] = q0
+    out[j, LOG_E1] = f1 if delivered else math.nan
+    out[j, LOG_E2] = f2 if delivered else math.nan
+    out[j, LOG_YAW_RATE] = r
+    out[j, LOG_AY] = ay
+    out[j, LOG_ALPHA_F] = af
+    out[j, LOG_ALPHA_R] = ar
+    out[j, LOG_FYF] = Fyf
+    out[j, LOG_FYR] = Fyr
+    out[j, LOG_S] = s
+
+
+@njit(cache=True, inline="always")
+def knot_lookup(s, ks, kv):
+    """``(kappa, dkappa/ds)`` at ``s`` [m] of the piecewise-linear curvature through knots ``(ks, kv)``.
+
+    ``dkappa/ds`` is the slope of the segment containing ``s`` (so ``psi_ddot_des``
+    integrates exactly to ``psi_dot_des``). Constant beyond the end knots.
+    """
+    n = ks.shape[0]
+    if s <= ks[0]:
+        return kv[0], 0.0
+    if s >= ks[n - 1]:
+        return kv[n - 1], 0.0
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if ks[mid] <= s:
+            lo = mid
+        else:
+            hi = mid
+    slope = (kv[hi] - kv[lo]) / (ks[hi] - ks[lo])
+    return kv[lo] + slope * (s - ks[lo]), slope
 
 
 @njit(cache=True)
-def advance_bicycle(
-    n_ticks, dt, tick0, state, s0, vx, ax, veh, tf, tr, tabf, tabr, eff,
-    road_k, road_dk, road_ds, cam, cstate, counters, pending, noise, drop,
-    drv, dstate, guard, steering_offset, steering, last_delta, out,
-):  # fmt: skip
-    """Run ``n_ticks`` ticks of camera -> driver -> a_y guard -> RK4 plant; fill ``out`` (n_ticks, N_LOG).
+def _knot_integral(s, ks, kv, cum):
+    """``integral_{ks[0]}^{s} kappa`` [rad] (``cum[i]`` = the integral up to knot ``i``)."""
+    n = ks.shape[0]
+    if s <= ks[0]:
+        return kv[0] * (s - ks[0])
+    if s >= ks[n - 1]:
+        return cum[n - 1] + kv[n - 1] * (s - ks[n - 1])
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if ks[mid] <= s:
+            lo = mid
+        else:
+            hi = mid
+    x = s - ks[lo]
+    slope = (kv[hi] - kv[lo]) / (ks[hi] - ks[lo])
+    return cum[lo] + kv[lo] * x + 0.5 * slope * x * x
 
-    ``steering`` NaN means the driver steers (plus ``steering_offset``); otherwise it is
-    the full road-wheel angle. ``guard`` is the steering a_y guard (:func:`guard_steering`;
-    its last-a_y entry is updated). Returns ``(s, last_delta)`` at the end.
+
+@njit(cache=True)
+def preview_curvature(s, preview, ks, kv, cum):
+    """Mean curvature [1/m] over ``[s - preview/2, s + preview/2]`` (exact); ``kappa(s)`` if ``preview <= 0``.
+
+    highway-env joins straights and arcs without transition curves; a feed-forward of the
+    current curvature would step the steering at every join, so the driver eases in over
+    ``preview`` metres centred on the join, as a clothoid of that length would make it.
+    """
+    if preview <= 0.0:
+        return knot_lookup(s, ks, kv)[0]
+    h = 0.5 * preview
+    return (_knot_integral(s + h, ks, kv, cum) - _knot_integral(s - h, ks, kv, cum)) / preview
+
+
+@njit(cache=True)
+def lane_change_reference(s, offset, s_start, length):
+    """Minimum-jerk lateral path of a lane change in the target lane's frame.
+
+    ``e1_ref(s) = offset (1 - m(u))``, ``u = (s - s_start) / length`` clipped to [0, 1],
+    ``m = 10 u^3 - 15 u^4 + 6 u^5``: the path leaves the old lane centre (``e1 = offset``)
+    along the lane direction and joins the new one (``e1 = 0``) tangentially after
+    ``length`` metres. Returns ``(e1_ref [m], de1_ref/ds [-], d2e1_ref/ds2 [1/m])``; zero
+    when ``offset == 0`` or after the manoeuvre. A path in space (not in time), so braking
+    during the manoeuvre does not sharpen it.
+    """
+    if offset == 0.0 or length <= 0.0:
+        return 0.0, 0.0, 0.0
+    u = (s - s_start) / length
+    if u >= 1.0:
+        return 0.0, 0.0, 0.0
+    if u <= 0.0:
+        return offset, 0.0, 0.0
+    u2 = u * u
+    u3 = u2 * u
+    m = u3 * (10.0 - 15.0 * u + 6.0 * u2)
+    dm = 30.0 * u2 * (1.0 - 2.0 * u + u2)
+    ddm = 60.0 * u * (1.0 - 3.0 * u + 2.0 * u2)
+    return offset * (1.0 - m), -offset * dm / length, -offset * ddm / (length * length)
+
+
+@njit(cache=True)
+def lane_change_driver_inputs(s, e1_meas, e2_meas, kappa, lc_offset, lc_s0, lc_len):
+    """Measured errors relative to the lane-change path (:func:`lane_change_reference`), and the
+    feed-forward curvature plus the path's curvature: ``(e1 - e1_ref, e2 - de1_ref/ds, kappa + d2e1_ref/ds2)``."""
+    r0, r1, r2 = lane_change_reference(s, lc_offset, lc_s0, lc_len)
+    return e1_meas - r0, e2_meas - r1, kappa + r2
+
+
+@njit(cache=True, inline="always")
+def curvature_at(s, source, curve_a, curve_b, curve_ds):
+    """``(kappa, dkappa/ds)`` at ``s`` [m] from a road table (``source == CURVATURE_TABLE``:
+    ``curve_a, curve_b`` = kappa, dkappa on a grid of ``curve_ds``) or lane knots
+    (``CURVATURE_KNOTS``: ``curve_a, curve_b`` = knot positions and curvatures)."""
+    if source == CURVATURE_TABLE:
+        return road_lookup(s, curve_a, curve_b, curve_ds)
+    return knot_lookup(s, curve_a, curve_b)
+
+
+@njit(cache=True)
+def advance_ticks(
+    n_ticks, dt, tick0, state, s0, vx0, ax, veh, tf, tr, tabf, tabr, eff,
+    curve_source, curve_a, curve_b, curve_ds, curve_cum, s_stop, preview_time,
+    cam, cstate, counters, pending, noise, drop, drv, dstate, guard,
+    steering_offset, steering, last_delta, lc_offset, lc_s0, lc_len, out,
+):  # fmt: skip
+    """Run up to ``n_ticks`` ticks of camera -> driver -> a_y guard -> RK4 plant; fill ``out`` rows.
+
+    The one compiled tick loop (the base simulator and the highway ego car).
+
+    Parameters
+    ----------
+    n_ticks, dt, tick0
+        Ticks to run, tick [s], index of the first tick (``t_j = (tick0 + j) dt``).
+    state : ndarray (6,)
+        Plant state ``[e1, e1_dot, e2, e2_dot, lag_f, lag_r]``, advanced in place.
+    s0, vx0, ax
+        Path coordinate [m], speed [m/s] at the first tick and the longitudinal acceleration
+        [m/s^2] held over the chunk (``vx`` is integrated tick by tick; constant when ``ax = 0``).
+    veh, tf, tr, tabf, tabr, eff
+        The plant's compiled parameters (``BicyclePlant.kernel_params()``).
+    curve_source, curve_a, curve_b, curve_ds, curve_cum
+        Curvature source (:func:`curvature_at`); ``curve_cum``: running integral at the knots
+        (knots only, for the driver's preview).
+    s_stop : float
+        Stop before a tick that starts at ``s >= s_stop`` [m] (a lane hand-over; inf: never).
+    preview_time : float
+        The driver's curvature feed-forward is the mean over ``preview_time * vx`` metres
+        centred on ``s`` (knots only; 0: the curvature at ``s``).
+    cam, cstate, counters, pending, noise, drop
+        Camera (``Camera.kernel_args()``).
+    drv, dstate, guard
+        Driver parameters, integral state and the a_y guard (its last-a_y entry is updated).
+    steering_offset, steering, last_delta
+        ``steering`` NaN: the driver steers, plus ``steering_offset``; otherwise the full
+        road-wheel angle [rad]. ``last_delta``: the steering of the previous tick [rad].
+    lc_offset, lc_s0, lc_len
+        Lane-change path (:func:`lane_change_reference`; ``lc_offset = 0``: none).
+    out : ndarray (n_ticks, N_LOG)
+        Tick log rows (:data:`LOG_COLUMNS`), row ``j`` at instant ``t_j``.
+
+    Returns
+    -------
+    s, vx, delta, done, status
+        Path coordinate [m], speed [m/s] and steering [rad] after the last tick done, the
+        number of ticks done, and ``STOP_DONE`` / ``STOP_HANDOVER`` / ``STOP_BLOWUP``.
+
+    Notes
+    -----
+    The RK4 midpoint curvature is looked up at ``s + vx dt/2 + ax dt^2/8`` (the exact midpoint
+    under constant ``ax``). The Python loop of the base simulator with a speed profile omits the
+    ``ax dt^2/8`` term (:func:`~tire_learning_env.simulation.advance_ticks_python`,
+    ``midpoint_ax_factor``); with ``ax = 0`` the two agree to the bit.
     """
     s = s0
-    max_steer = drv[DRV_MAX]
+    vx = vx0
     delta = last_delta
-    vx_mid = vx + 0.5 * dt * ax
-    vx_end = vx + dt * ax
+    max_steer = drv[DRV_MAX]
     for j in range(n_ticks):
+        if s >= s_stop:
+            return s, vx, delta, j, STOP_HANDOVER
         t = (tick0 + j) * dt
-        k0, dk0 = road_lookup(s, road_k, road_dk, road_ds)
-        k1, dk1 = road_lookup(s + 0.5 * dt * vx, road_k, road_dk, road_ds)
+        vx_mid = vx + 0.5 * dt * ax
+        vx_end = vx + dt * ax
+        k0, dk0 = curvature_at(s, curve_source, curve_a, curve_b, curve_ds)
+        k1, dk1 = curvature_at(s + 0.5 * dt * vx + 0.125 * dt * dt * ax, curve_source, curve_a, curve_b, curve_ds)
         s_end = s + 0.5 * dt * (vx + vx_end)
-        k2, dk2 = road_lookup(s_end, road_k, road_dk, road_ds)
+        k2, dk2 = curvature_at(s_end, curve_source, curve_a, curve_b, curve_ds)
         delivered, f1, f2 = camera_tick(t, state[0], state[2], cam, cstate, counters, pending, noise, drop)
         delta_prev = delta
         if steering != steering:
-            delta = driver_steer(cstate[CAMS_LATEST_E1], cstate[CAMS_LATEST_E2], k0, vx, dt, drv, dstate) + steering_offset
+            kp = k0
+            if curve_source == CURVATURE_KNOTS:
+                kp = preview_curvature(s, preview_time * vx, curve_a, curve_b, curve_cum)
+            e1m = cstate[CAMS_LATEST_E1]
+            e2m = cstate[CAMS_LATEST_E2]
+            if lc_offset != 0.0:
+                e1m, e2m, kp = lane_change_driver_inputs(s, e1m, e2m, kp, lc_offset, lc_s0, lc_len)
+            delta = driver_steer(e1m, e2m, kp, vx, dt, drv, dstate) + steering_offset
         else:
             delta = steering
         delta = guard_steering(min(max(delta, -max_steer), max_steer), delta_prev, guard)
@@ -314,18 +495,18 @@ def advance_bicycle(
             delta = -max_steer
         p0 = vx * k0
         q0 = vx * vx * dk0 + ax * k0
-        out[j, 11] = state[0]
-        out[j, 12] = state[1]
-        out[j, 13] = state[2]
-        out[j, 14] = state[3]
+        record_true_state(out, j, state)
         af, ar, Fyf, Fyr, r, ay = bicycle_rk4_step(
             state, delta, dt, p0, vx_mid * k1, vx_end * k2,
             q0, vx_mid * vx_mid * dk1 + ax * k1, vx_end * vx_end * dk2 + ax * k2,
             vx, ax, veh, tf, tr, tabf, tabr, eff,
         )  # fmt: skip
-        if not (math.isfinite(state[0]) and math.isfinite(state[1]) and math.isfinite(state[2]) and math.isfinite(state[3])):
-            return s, delta, j  # caller raises with the time and state
+        if not (
+            math.isfinite(state[0]) and math.isfinite(state[1]) and math.isfinite(state[2]) and math.isfinite(state[3])
+        ):
+            return s, vx, delta, j, STOP_BLOWUP
         guard[GUARD_AY] = ay
         record_tick(out, j, t, delta, vx, ax, k0, p0, q0, delivered, f1, f2, r, ay, af, ar, Fyf, Fyr, s)
         s = s_end
-    return s, delta, n_ticks
+        vx = vx_end
+    return s, vx, delta, n_ticks, STOP_DONE

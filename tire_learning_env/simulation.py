@@ -22,7 +22,22 @@ from typing import Callable, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from ._kernels import GUARD_AY, LOG_COLUMNS, N_LOG, advance_bicycle, guard_steering, road_lookup
+from ._kernels import (
+    CURVATURE_TABLE,
+    GUARD_AY,
+    LOG_INDEX,
+    LOG_TRUE_E1,
+    LOG_TRUE_E2_DOT,
+    N_LOG,
+    STOP_BLOWUP,
+    STOP_DONE,
+    STOP_HANDOVER,
+    advance_ticks,
+    guard_steering,
+    lane_change_driver_inputs,
+    record_tick,
+    road_lookup,
+)
 from .driver import LaneKeepingDriver
 from .dynamics import BicyclePlant, PlantEffects
 from .params import CameraParams, DriverParams, ParameterError, RoadParams, TireParams, VehicleParams
@@ -30,7 +45,17 @@ from .roads import Road, make_road
 from .sensors import Camera
 from .tires import TireModel, axle_tires
 
-__all__ = ["Plant", "RoadTable", "Simulator", "SimulationLog", "simulate", "SENSOR_KEYS", "TRUTH_KEYS"]
+__all__ = [
+    "Plant",
+    "RoadTable",
+    "Simulator",
+    "SimulationLog",
+    "simulate",
+    "advance_ticks_python",
+    "log_from_rows",
+    "SENSOR_KEYS",
+    "TRUTH_KEYS",
+]
 
 SENSOR_KEYS = ("t", "delta", "vx", "ax", "kappa", "psi_dot_des", "psi_ddot_des", "e1", "e2", "yaw_rate", "ay")
 TRUTH_KEYS = ("true_state", "true_slip", "true_force", "true_force_nonlinear", "s")
@@ -214,59 +239,156 @@ class Simulator:
         """
         out = np.empty((n_ticks, N_LOG))
         self.camera.ensure_noise(n_ticks)
-        use_kernel = self.speed_profile is None and hasattr(self.plant, "kernel_params")
-        if use_kernel:
-            self._advance_compiled(n_ticks, steering_offset, steering, out)
-        else:
-            self._advance_python(n_ticks, steering_offset, steering, out)
-        self.tick_index += n_ticks
-        self.t = self.tick_index * self.dt
-        return self._log(out)
-
-    def _advance_compiled(self, n_ticks: int, steering_offset: float, steering: float | None, out: NDArray) -> None:
         vx, ax = self._vx0
-        self.table.cover(self.s + (n_ticks + 2) * self.dt * vx + 1.0)
-        s, delta, done = advance_bicycle(
-            n_ticks, self.dt, self.tick_index, self.plant.state, self.s, vx, ax, *self.plant.kernel_params(),
-            self.table.kappa, self.table.dkappa, self.table.ds, *self.camera.kernel_args(),
-            self.driver.param_vec, self.driver.state, self.driver.guard, float(steering_offset),
-            math.nan if steering is None else float(steering), self.last_delta, out,
-        )  # fmt: skip
-        if done < n_ticks:
+        offset = float(steering_offset)
+        full = math.nan if steering is None else float(steering)
+        if self.speed_profile is None and hasattr(self.plant, "kernel_params"):
+            self.table.cover(self.s + (n_ticks + 2) * self.dt * vx + 1.0)
+            s, _, delta, done, status = advance_ticks(
+                n_ticks, self.dt, self.tick_index, self.plant.state, self.s, vx, ax, *self.plant.kernel_params(),
+                CURVATURE_TABLE, self.table.kappa, self.table.dkappa, self.table.ds, _NO_KNOTS, math.inf, 0.0,
+                *self.camera.kernel_args(), self.driver.param_vec, self.driver.state, self.driver.guard,
+                offset, full, self.last_delta, 0.0, 0.0, 1.0, out,
+            )  # fmt: skip
+            compiled = True
+        else:
+            compiled = False
+            profile = None if self.speed_profile is None else self._profile_speed
+            s, _, delta, done, status = advance_ticks_python(
+                n_ticks, self.dt, self.tick_index, self.plant, self.s, vx, ax, self.table.lookup, self.camera,
+                self.driver, offset, full, self.last_delta, out, speed_profile=profile,
+                midpoint_ax_factor=0.0 if profile is not None else 0.125,
+            )  # fmt: skip
+        if status == STOP_BLOWUP:
             t = (self.tick_index + done) * self.dt
             raise FloatingPointError(
-                f"simulation blew up at t={t:.4f} s: state {self.plant.state.tolist()}, delta={delta}"
+                f"simulation blew up at t={t:.4f} s: state {np.asarray(self.plant.state).tolist()}, delta={delta}"
             )
         self.s, self.last_delta = s, delta
-        # the inputs held at the end of the chunk, as BicyclePlant.step records them (for output())
-        k, dk = self.table.lookup(s)
-        vx_end = vx + self.dt * ax
-        self.plant.hold_inputs(delta, vx_end, ax, vx_end * k, vx_end * vx_end * dk + ax * k)
+        if compiled:
+            # the inputs held at the end of the chunk, as BicyclePlant.step records them (for output())
+            k, dk = self.table.lookup(s)
+            vx_end = vx + self.dt * ax
+            self.plant.hold_inputs(delta, vx_end, ax, vx_end * k, vx_end * vx_end * dk + ax * k)
+        self.tick_index += n_ticks
+        self.t = self.tick_index * self.dt
+        return SimulationLog(*log_from_rows(out, self.plant.vehicle), self.dt, self.plant.vehicle)
 
-    def _advance_python(self, n_ticks: int, steering_offset: float, steering: float | None, out: NDArray) -> None:
-        """The same tick sequence as :func:`._kernels.advance_bicycle`, for any plant."""
-        dt, plant, cam, drv = self.dt, self.plant, self.camera, self.driver
-        max_steer = drv.params.max_steering
-        s, delta = self.s, self.last_delta
-        for j in range(n_ticks):
-            t = (self.tick_index + j) * dt
-            vx, ax = self._speed(t)
-            vx_mid, vx_end = vx + 0.5 * dt * ax, vx + dt * ax
-            k0, dk0 = self.table.lookup(s)
-            k1, dk1 = self.table.lookup(s + 0.5 * dt * vx)
-            s_end = s + 0.5 * dt * (vx + vx_end)
-            k2, dk2 = self.table.lookup(s_end)
-            state = plant.state
-            frame = cam.tick(t, state[0], state[2])
-            delta_prev = delta
-            if steering is None:
-                delta = drv.steer(*cam.latest, k0, vx, dt) + steering_offset
-            else:
-                delta = steering
-            delta = guard_steering(min(max(delta, -max_steer), max_steer), delta_prev, drv.guard)
-            delta = min(max(delta, -max_steer), max_steer)
-            p0, q0 = vx * k0, vx * vx * dk0 + ax * k0
-            out[j, 11:15] = state[:4]
+
+_NO_KNOTS = np.zeros(0)  # the running curvature integral a road table does not need
+
+
+def log_from_rows(out: NDArray, vehicle: VehicleParams) -> tuple[dict[str, NDArray], dict[str, NDArray]]:
+    """``(sensors, truth)`` of tick-log rows ``out`` (n, N_LOG) (:data:`~._kernels.LOG_COLUMNS`).
+
+    ``true_force_nonlinear`` is ``F_y - 2 C alpha`` with the nominal ``vehicle``'s stiffness.
+    """
+    col = LOG_INDEX
+    sensors = {key: out[:, col[key]].copy() for key in SENSOR_KEYS}
+    slip = out[:, col["alpha_f"] : col["alpha_r"] + 1].copy()
+    force = out[:, col["Fyf"] : col["Fyr"] + 1].copy()
+    truth = {
+        "true_state": out[:, col["true_e1"] : col["true_e2_dot"] + 1].copy(),
+        "true_slip": slip,
+        "true_force": force,
+        "true_force_nonlinear": force - slip * np.array([2.0 * vehicle.Cf, 2.0 * vehicle.Cr]),
+        "s": out[:, col["s"]].copy(),
+    }
+    return sensors, truth
+
+
+def advance_ticks_python(
+    n_ticks: int,
+    dt: float,
+    tick0: int,
+    plant: Plant,
+    s0: float,
+    vx0: float,
+    ax: float,
+    curvature: Callable[[float], tuple[float, float]],
+    camera: Camera,
+    driver: LaneKeepingDriver,
+    steering_offset: float,
+    steering: float,
+    last_delta: float,
+    out: NDArray,
+    *,
+    s_stop: float = math.inf,
+    feedforward_curvature: Callable[[float, float], float] | None = None,
+    lane_change: tuple[float, float, float] = (0.0, 0.0, 1.0),
+    speed_profile: Callable[[float], tuple[float, float]] | None = None,
+    midpoint_ax_factor: float = 0.125,
+) -> tuple[float, float, float, int, int]:
+    """The tick sequence of :func:`~._kernels.advance_ticks` for any plant (the Python reference loop).
+
+    Parameters
+    ----------
+    n_ticks, dt, tick0
+        Ticks to run, tick [s], index of the first tick.
+    plant : Plant
+        Any truth vehicle of the :class:`Plant` protocol (``state[:4]`` = error state).
+    s0, vx0, ax
+        Path coordinate [m], speed [m/s] at the first tick, longitudinal acceleration [m/s^2]
+        (``vx`` integrated tick by tick, unless ``speed_profile`` gives both per tick).
+    curvature : callable
+        ``s -> (kappa [1/m], dkappa/ds [1/m^2])`` of the reference path.
+    camera, driver
+        :class:`~.sensors.Camera` and :class:`~.driver.LaneKeepingDriver` (their ``tick``,
+        ``latest``, ``steer`` and ``guard``).
+    steering_offset, steering, last_delta
+        As :func:`~._kernels.advance_ticks` (``steering`` NaN: the driver steers).
+    out : ndarray (n_ticks, N_LOG)
+        Tick log rows, written through :func:`~._kernels.record_tick`.
+    s_stop : float
+        Stop before a tick that starts at ``s >= s_stop`` [m].
+    feedforward_curvature : callable, optional
+        ``(s, vx) -> kappa`` the driver feeds forward (default: the curvature at ``s``).
+    lane_change : tuple
+        ``(offset [m], s_start [m], length [m])`` of a lane-change path (offset 0: none).
+    speed_profile : callable, optional
+        ``t -> (vx, ax)`` evaluated every tick (the base simulator's speed profiles).
+    midpoint_ax_factor : float
+        The RK4 midpoint curvature is looked up at ``s + vx dt/2 + factor ax dt^2``: 1/8 is the
+        exact midpoint under constant ``ax`` (the compiled loop, the highway ego); the base
+        simulator's speed-profile runs use 0 (their logs predate the term; it moves the lookup
+        by ``ax dt^2 / 8``, 1.9e-7 m at 1.5 m/s^2 and 1 kHz). With ``ax = 0`` both agree to the bit.
+
+    Returns
+    -------
+    s, vx, delta, done, status
+        As :func:`~._kernels.advance_ticks`; a ``FloatingPointError`` of ``plant.step`` or a
+        non-finite state stops the loop with ``STOP_BLOWUP``.
+    """
+    s, vx, delta = s0, vx0, last_delta
+    lc_offset, lc_s0, lc_len = lane_change
+    max_steer = driver.params.max_steering
+    for j in range(n_ticks):
+        if s >= s_stop:
+            return s, vx, delta, j, STOP_HANDOVER
+        t = (tick0 + j) * dt
+        if speed_profile is not None:
+            vx, ax = speed_profile(t)
+        vx_mid, vx_end = vx + 0.5 * dt * ax, vx + dt * ax
+        k0, dk0 = curvature(s)
+        k1, dk1 = curvature(s + 0.5 * dt * vx + midpoint_ax_factor * dt * dt * ax)
+        s_end = s + 0.5 * dt * (vx + vx_end)
+        k2, dk2 = curvature(s_end)
+        state = plant.state
+        frame = camera.tick(t, state[0], state[2])
+        delta_prev = delta
+        if steering != steering:
+            e1m, e2m = camera.latest
+            kp = k0 if feedforward_curvature is None else feedforward_curvature(s, vx)
+            if lc_offset != 0.0:
+                e1m, e2m, kp = lane_change_driver_inputs(s, e1m, e2m, kp, lc_offset, lc_s0, lc_len)
+            delta = driver.steer(e1m, e2m, kp, vx, dt) + steering_offset
+        else:
+            delta = steering
+        delta = guard_steering(min(max(delta, -max_steer), max_steer), delta_prev, driver.guard)
+        delta = min(max(delta, -max_steer), max_steer)
+        p0, q0 = vx * k0, vx * vx * dk0 + ax * k0
+        out[j, LOG_TRUE_E1 : LOG_TRUE_E2_DOT + 1] = state[:4]
+        try:
             af, ar, Fyf, Fyr, r, ay = plant.step(
                 delta,
                 dt,
@@ -275,27 +397,16 @@ class Simulator:
                 vx,
                 ax,
             )
-            drv.guard[GUARD_AY] = ay
-            e1f, e2f = frame if frame is not None else (math.nan, math.nan)
-            out[j, :11] = (t, delta, vx, ax, k0, p0, q0, e1f, e2f, r, ay)
-            out[j, 15:] = (af, ar, Fyf, Fyr, s)
-            s = s_end
-        self.s, self.last_delta = s, delta
-
-    def _log(self, out: NDArray) -> SimulationLog:
-        col = {name: i for i, name in enumerate(LOG_COLUMNS)}
-        veh = self.plant.vehicle
-        sensors = {key: out[:, col[key]].copy() for key in SENSOR_KEYS}
-        slip = out[:, col["alpha_f"] : col["alpha_r"] + 1].copy()
-        force = out[:, col["Fyf"] : col["Fyr"] + 1].copy()
-        truth = {
-            "true_state": out[:, col["true_e1"] : col["true_e2_dot"] + 1].copy(),
-            "true_slip": slip,
-            "true_force": force,
-            "true_force_nonlinear": force - slip * np.array([2.0 * veh.Cf, 2.0 * veh.Cr]),
-            "s": out[:, col["s"]].copy(),
-        }
-        return SimulationLog(sensors, truth, self.dt, veh)
+        except FloatingPointError:
+            return s, vx, delta, j, STOP_BLOWUP
+        if not np.all(np.isfinite(np.asarray(plant.state[:4], dtype=float))):
+            return s, vx, delta, j, STOP_BLOWUP
+        driver.guard[GUARD_AY] = ay
+        delivered = frame is not None
+        e1f, e2f = frame if delivered else (math.nan, math.nan)
+        record_tick(out, j, t, delta, vx, ax, k0, p0, q0, delivered, e1f, e2f, r, ay, af, ar, Fyf, Fyr, s)
+        s, vx = s_end, vx_end
+    return s, vx, delta, n_ticks, STOP_DONE
 
 
 def simulate(

@@ -26,7 +26,7 @@ endurance result are in ``docs/highway.md``.
 
 Modules: :mod:`.highway_lanes` (lane geometry, :class:`LaneReference`), :mod:`.highway_ego`
 (the highway-env ego vehicle), :mod:`.highway_decisions` (lane-change rule, speed),
-:mod:`.highway_rendering`, :mod:`.highway_kernel` (the physics loop), :mod:`.highway_traffic`
+:mod:`.highway_rendering`, :mod:`.highway_traffic`
 (the env core: physics chunking, target-lane switches, logs) and :mod:`.highway_scenes`
 (the two scenes). This module re-exports their public names.
 """

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from highway_env.road.lane import AbstractLane, CircularLane, StraightLane
 from highway_env.road.road import RoadNetwork
 
-from .highway_kernel import knot_lookup
+from .._kernels import knot_lookup
 
 __all__ = ["LaneReference", "lane_curvature", "wrap_angle", "SWITCH_JOIN", "SWITCH_LANE_CHANGE"]
 

@@ -12,15 +12,29 @@ from numpy.typing import NDArray
 from highway_env.road.lane import AbstractLane
 from highway_env.road.road import Road as HighwayRoad
 
-from .._kernels import CAMC_COUNT, CAMC_HEAD, CAMS_LATEST_E1, CAMS_LATEST_E2, LOG_COLUMNS, N_LOG, bicycle_rhs
+from .._kernels import (
+    CAMC_COUNT,
+    CAMC_HEAD,
+    CAMS_LATEST_E1,
+    CAMS_LATEST_E2,
+    CURVATURE_KNOTS,
+    LOG_AX,
+    N_LOG,
+    STOP_BLOWUP,
+    STOP_HANDOVER,
+    advance_ticks,
+    bicycle_rhs,
+    knot_lookup,
+    lane_change_reference,
+    preview_curvature,
+)
 from ..driver import LaneKeepingDriver
 from ..params import ParameterError, VehicleParams, check_keys
 from ..sensors import Camera
-from ..simulation import SENSOR_KEYS, Plant
+from ..simulation import Plant, advance_ticks_python, log_from_rows
 from ._base import TireLearningEnv, whole_rate_ratio
 from .highway_decisions import EgoDecisions
 from .highway_ego import TruthEgoVehicle
-from .highway_kernel import STOP_BLOWUP, STOP_HANDOVER, advance_ego, advance_ego_python, lane_change_reference
 from .highway_lanes import SWITCH_JOIN, SWITCH_LANE_CHANGE, LaneReference, wrap_angle
 from .highway_rendering import make_viewer
 
@@ -31,7 +45,6 @@ TRAFFIC_FEATURE_NAMES = ("present", "ds", "dl", "dv")
 #: Meaning of the discrete action when ``lane_change="action"`` (highway-env's lane ids).
 LANE_ACTIONS = ("keep", "lane_id_minus_1", "lane_id_plus_1")
 
-_COL = {name: i for i, name in enumerate(LOG_COLUMNS)}
 _TRAFFIC_HIGH = np.array([1.0, 200.0, 20.0, 50.0], dtype=np.float32)
 _TRAFFIC_LOW = np.array([0.0, -200.0, -20.0, -50.0], dtype=np.float32)
 
@@ -307,22 +320,24 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
             lc_offset, lc_s0, lc_len = self._lc
             if self._compiled:
                 self.camera.ensure_noise(left)
-                s, vx, delta, done, status = advance_ego(
+                s, vx, delta, done, status = advance_ticks(
                     left, self.dt, tick0, self.plant.state, self.s, self.vx, self.ax, *self.plant.kernel_params(),
-                    ks, kv, kcum, s_stop, self.curvature_preview, *self.camera.kernel_args(),
+                    CURVATURE_KNOTS, ks, kv, 0.0, kcum, s_stop, self.curvature_preview, *self.camera.kernel_args(),
                     self.driver.param_vec, self.driver.state, self.driver.guard, float(offset), float(steering),
                     self.last_delta, lc_offset, lc_s0, lc_len, chunk,
                 )  # fmt: skip
             else:
-                s, vx, delta, done, status = advance_ego_python(
-                    left, self.dt, tick0, self.plant, self.s, self.vx, self.ax, ks, kv, kcum, s_stop,
-                    self.curvature_preview, self.camera, self.driver, float(offset), float(steering), self.last_delta,
-                    lc_offset, lc_s0, lc_len, chunk,
+                preview = self.curvature_preview
+                s, vx, delta, done, status = advance_ticks_python(
+                    left, self.dt, tick0, self.plant, self.s, self.vx, self.ax, lambda x: knot_lookup(x, ks, kv),
+                    self.camera, self.driver, float(offset), float(steering), self.last_delta, chunk, s_stop=s_stop,
+                    feedforward_curvature=lambda x, v: preview_curvature(x, preview * v, ks, kv, kcum),
+                    lane_change=(lc_offset, lc_s0, lc_len),
                 )  # fmt: skip
             self.s, self.vx, self.last_delta = float(s), float(vx), float(delta)
             done_total += done
             if done:
-                self._last_tick = (float(delta), float(chunk[done - 1, _COL["ax"]]))
+                self._last_tick = (float(delta), float(chunk[done - 1, LOG_AX]))
             if status == STOP_BLOWUP:
                 t = (tick0 + done) * self.dt
                 raise FloatingPointError(
@@ -477,18 +492,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         return info
 
     def _as_logs(self, out: NDArray) -> tuple[dict, dict]:
-        sensors = {key: out[:, _COL[key]].copy() for key in SENSOR_KEYS}
-        slip = out[:, _COL["alpha_f"] : _COL["alpha_r"] + 1].copy()
-        force = out[:, _COL["Fyf"] : _COL["Fyr"] + 1].copy()
-        veh = self.vehicle
-        truth = {
-            "true_state": out[:, _COL["true_e1"] : _COL["true_e2_dot"] + 1].copy(),
-            "true_slip": slip,
-            "true_force": force,
-            "true_force_nonlinear": force - slip * np.array([2.0 * veh.Cf, 2.0 * veh.Cr]),
-            "s": out[:, _COL["s"]].copy(),
-        }
-        return sensors, truth
+        return log_from_rows(out, self.vehicle)
 
     def _switch_info(self) -> dict[str, NDArray]:
         sw = self._switches
