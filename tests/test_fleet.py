@@ -50,7 +50,7 @@ def test_run_items_failure_is_a_row_and_resume_skips_done(local_ray, tmp_path):
     assert [r.status for r in res] == ["ok", "ok", "ok", "failed", "ok", "ok"]
     assert res[3].error == "ValueError: item 3 is corrupt (second line)" and res[3].result is None
     assert [r.result["square"] for r in res if r.status == "ok"] == [0, 1, 4, 16, 25]
-    assert len({r.result["pid"] for r in res if r.status == "ok"}) == 2  # two Ray workers shared the items
+    assert all(r.result["pid"] != os.getpid() and r.node for r in res if r.status == "ok")  # ran in Ray workers
     assert sorted(r.key for r in seen) == [str(i) for i in range(6)]
     assert len(store.read_text().splitlines()) == 6
     # re-run: done items are skipped with their stored result; the failed one runs again
@@ -136,15 +136,19 @@ def test_batch_on_local_ray_with_broken_logs_and_resume(local_ray, fleet, tmp_pa
     assert rows["broken"]["status"] == "failed" and "column 'delta', line 3: 'x' is not a number" in rows["broken"]["error"]
     assert rows["junk"]["status"] == "failed" and "not a readable MF4 file" in rows["junk"]["error"]
     for name, r in ok.items():
-        assert r["kind"] == "camera" and r["verdict"]
-        k, lo, hi = (float(r[f"stiffness_front{s}_N_per_rad"]) for s in ("", "_lo", "_hi"))
-        assert lo < k < hi and 5e4 < k < 2e5
+        assert r["kind"] == "camera" and r["verdict"] in ("identified", "not_identifiable")
+        lo, hi = (float(r[f"stiffness_front{s}_N_per_rad"]) for s in ("_lo", "_hi"))
+        assert 5e4 < lo < hi < 2e5  # the band is always reported
+        if r["stiffness_front_N_per_rad"]:  # a value only where the estimator names one
+            assert lo < float(r["stiffness_front_N_per_rad"]) < hi
         assert 0 <= float(r["curve_nrmse_front"]) < 1.0  # the simulated logs carry truth
         folder = out / name
         assert {"metrics.json", "estimates.csv", "tire_curves.csv", "tire_curves.png",
                 ".tire_learning_manifest.json"} <= {p.name for p in folder.iterdir()}  # fmt: skip
         metrics = json.loads((folder / "metrics.json").read_text())
-        assert metrics["summary"]["stiffness_front_N_per_rad"] == pytest.approx(k, rel=1e-5)
+        assert metrics["summary"]["verdict"] == r["verdict"]
+        assert metrics["summary"]["stiffness_front_2sigma_N_per_rad"] == pytest.approx([lo, hi], rel=1e-5)
+    assert any(r["stiffness_front_N_per_rad"] for r in ok.values())
     import pyarrow.parquet as pq
 
     table = pq.read_table(out / "summary.parquet").to_pydict()
@@ -226,3 +230,58 @@ def test_multi_node_kill_loses_no_result(tmp_path):
     assert r["killed"] and r["recorded_before_kill"] >= 3
     assert r["lost"] == 0 and r["ok"] == 10 and r["failed"] == 0 and r["stored_records"] == 10
     assert r["results_after_kill_from_killed_node"] == 0  # the dead node's unfinished tasks ran elsewhere
+
+
+# -- agents/train.py: several seeds as tasks of the same runner, resumable ---------------------
+AGENTS = Path(__file__).resolve().parents[1] / "agents"
+
+
+def _tiny_config(tmp_path: Path) -> Path:
+    cfg = {"algo": "PPO", "n_envs": 1, "vec_env": "dummy", "total_timesteps": 32, "env_kwargs": {"record": False},
+           "policy_kwargs": {"net_arch": [8]}, "algo_kwargs": {"n_steps": 16, "batch_size": 16, "n_epochs": 1}}  # fmt: skip
+    path = tmp_path / "tiny_ppo.json"
+    path.write_text(json.dumps(cfg))
+    return path
+
+
+def _train_script():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("agents_train_under_test", AGENTS / "train.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _sweep_and_resume(tmp_path: Path, engine_args: list[str]) -> None:
+    train = _train_script()
+    cfg = _tiny_config(tmp_path)
+    out = tmp_path / "sweep"
+    argv = ["--config", str(cfg), "--seeds", "0", "1", "--out", str(out), "--no-progress", *engine_args]
+    assert train.main(argv) == 0
+    runs = {r.key: r for r in ResultStore(out / "runs.jsonl").load().values()}
+    assert set(runs) == {"tiny_ppo_seed0", "tiny_ppo_seed1"} and all(r.status == "ok" for r in runs.values())
+    for seed in (0, 1):
+        run = json.loads((out / f"tiny_ppo_seed{seed}" / "run.json").read_text())
+        assert run["seed"] == seed and run["timesteps"] >= 32
+        assert (out / f"tiny_ppo_seed{seed}" / "final_model.zip").is_file()
+    mtime = (out / "tiny_ppo_seed0" / "final_model.zip").stat().st_mtime_ns
+    # resume: the finished runs are skipped (not retrained); a new seed runs
+    assert train.main(argv[:5] + ["2"] + argv[5:]) == 0
+    with open(out / "runs.csv", newline="") as fh:
+        status = {row["run"]: row["status"] for row in csv.DictReader(fh)}
+    assert status == {"tiny_ppo_seed0": "skipped", "tiny_ppo_seed1": "skipped", "tiny_ppo_seed2": "ok"}
+    assert (out / "tiny_ppo_seed0" / "final_model.zip").stat().st_mtime_ns == mtime
+
+
+def test_training_sweep_resumes(tmp_path):
+    """Two seeds (serial engine: the same runner, store and resume as on Ray), then a third."""
+    _sweep_and_resume(tmp_path, ["--serial"])
+
+
+@pytest.mark.slow
+def test_training_sweep_on_ray(tmp_path):
+    """The same sweep as Ray tasks on a local 2-CPU Ray started by the script."""
+    if ray.is_initialized():
+        pytest.skip("needs its own Ray start (a module Ray instance is running)")
+    _sweep_and_resume(tmp_path, ["--workers", "2"])

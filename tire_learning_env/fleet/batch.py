@@ -15,10 +15,10 @@ Output folder ``DIR``::
 is ``ok`` and whose file and options are unchanged (``status = skipped``, the figures of the
 earlier run); failed logs are run again.
 
-Durability: each finished log is appended to ``batch_results.jsonl`` and to
-``summary.csv`` and ``fsync``-ed before the next one is recorded, so a kill of the command,
-a worker or a node loses no finished row. At the end ``summary.csv`` is rewritten
-atomically in the order of the logs.
+Durability: each finished log is appended to ``summary.csv`` and then to
+``batch_results.jsonl``, each ``fsync``-ed, before the next one is recorded, so a kill of the
+command, a worker or a node loses no finished row, and ``summary.csv`` holds every log the
+store holds. At the end ``summary.csv`` is rewritten atomically in the order of the logs.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from typing import Any, Sequence
 from ..io import (MANIFEST_NAME, LogFormatError, OutputPathError, atomic_write_json, atomic_write_text, check_output_dir,
                   read_manifest, run_context)  # fmt: skip
 from ..params import ParameterError
-from .runner import ItemResult, run_items
+from .runner import ItemResult, ResultStore, run_items
 
 __all__ = ["LOG_SUFFIXES", "COMMANDS", "SUMMARY_COLUMNS", "expand_logs", "output_names", "LogJob", "run_log",
            "run_batch", "BatchResult"]  # fmt: skip
@@ -284,12 +284,15 @@ def _cell(v: Any) -> str:
 
 
 class _SummaryCSV:
-    """``summary.csv``: a header now, then one appended + fsync-ed row per finished log."""
+    """``summary.csv``: the header and ``rows`` (atomically), then one appended + fsync-ed row per finished log."""
 
-    def __init__(self, path: Path, columns: list[str]) -> None:
+    def __init__(self, path: Path, columns: list[str], rows: Sequence[dict] = ()) -> None:
         self.path, self.columns = path, columns
         buf = _io.StringIO()
-        csv.writer(buf, lineterminator="\n").writerow(columns)
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(columns)
+        for row in rows:
+            w.writerow([_cell(row.get(c, "")) for c in columns])
         atomic_write_text(path, buf.getvalue())
         self.fh = open(path, "a", encoding="utf-8", newline="")
         self.writer = csv.writer(self.fh, lineterminator="\n")
@@ -404,13 +407,21 @@ def run_batch(
             for p, n in zip(paths, names)]  # fmt: skip
     prints = [_fingerprint(p, j, extra) for p, j in zip(paths, jobs)]
     columns = SUMMARY_COLUMNS[command]
-    summary = _SummaryCSV(out / "summary.csv", columns)
     index = {n: i for i, n in enumerate(names)}
-    logs_info: dict[str, tuple[Path, str]] = {n: (p, n) for p, n in zip(paths, names)}
+    # the rows of the logs an earlier run finished go into the new summary.csv in the same atomic
+    # write as its header: at no moment does the file lack a finished row
+    stored = ResultStore(out / STORE_NAME).load()
+    done_before = []
+    for p, n, fp in zip(paths, names, prints):
+        old = stored.get(n)
+        if old is not None and old.status in ("ok", "skipped") and old.fingerprint == fp:
+            old.status = "skipped"
+            done_before.append(_row(old, p, n, command))
+    summary = _SummaryCSV(out / "summary.csv", columns, done_before)
 
     def on_result(rec: ItemResult) -> None:
-        p, n = logs_info[rec.key]
-        summary.add(_row(rec, p, n, command))
+        if rec.status != "skipped":  # skipped rows are already in the file
+            summary.add(_row(rec, paths[index[rec.key]], rec.key, command))
 
     try:
         results = run_items(run_log, jobs, keys=names, fingerprints=prints, store=out / STORE_NAME, workers=workers,
@@ -507,11 +518,15 @@ def _fleet_figure(path: Path, rows: list[dict], command: str) -> None:
             lo = np.array([_num(r.get(f"stiffness_{axle}_lo_N_per_rad")) for r in done]) / 1e3
             hi = np.array([_num(r.get(f"stiffness_{axle}_hi_N_per_rad")) for r in done]) / 1e3
             ok = np.isfinite(y) & np.isfinite(lo) & np.isfinite(hi)
-            ax.errorbar(x[ok] + dx, y[ok], yerr=[y[ok] - lo[ok], hi[ok] - y[ok]], fmt="o", color=colour, capsize=3,
-                        label=f"{axle} (2 sigma band)")  # fmt: skip
-            bad = ~ok
-            if bad.any():
-                ax.plot(x[bad] + dx, np.zeros(bad.sum()), "x", color=colour, label=f"{axle}: not identifiable")
+            if ok.any():
+                ax.errorbar(x[ok] + dx, y[ok], yerr=[y[ok] - lo[ok], hi[ok] - y[ok]], fmt="o", color=colour, capsize=3,
+                            label=f"{axle}: estimate and 2 sigma band")  # fmt: skip
+            band_only = ~np.isfinite(y) & np.isfinite(lo) & np.isfinite(hi)
+            if band_only.any():  # not identifiable: the band without a value
+                mid = 0.5 * (lo + hi)
+                ax.errorbar(x[band_only] + dx, mid[band_only], yerr=0.5 * (hi - lo)[band_only], fmt="none",
+                            ecolor=colour, capsize=3, alpha=0.45, linestyle="--",
+                            label=f"{axle}: not identified (band only)")  # fmt: skip
         ax.set_ylabel("cornering stiffness per tire [kN/rad]")
         ax.set_title(f"fleet: stiffness per log ({len(done)} of {len(rows)} logs estimated)")
     else:

@@ -62,6 +62,9 @@ class ItemResult:
         One line naming what went wrong (empty when ok).
     runtime_s : float
         Wall time of ``fn(item)`` in the task [s] (the earlier run's when skipped).
+    cpu_s : float
+        CPU time of the task's process during ``fn(item)`` [s]; ``cpu_s / runtime_s`` below 1
+        means the task waited for a core (a loaded machine).
     worker : str
         ``host:pid`` that ran it.
     node : str
@@ -77,6 +80,7 @@ class ItemResult:
     result: Any = None
     error: str = ""
     runtime_s: float = float("nan")
+    cpu_s: float = float("nan")
     worker: str = ""
     node: str = ""
     fingerprint: str = ""
@@ -171,7 +175,7 @@ def _one_line(exc: BaseException) -> str:
 
 def _call(fn: Callable[[Any], Any], item: Any) -> dict:
     """Run ``fn(item)``, catching its exception; what a task returns."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     out = {"worker": f"{socket.gethostname()}:{os.getpid()}", "node": ""}
     if "ray" in sys.modules:
         try:
@@ -188,6 +192,7 @@ def _call(fn: Callable[[Any], Any], item: Any) -> dict:
         if os.environ.get("TIRE_LEARNING_DEBUG"):
             out["traceback"] = traceback.format_exc()
     out["runtime_s"] = time.perf_counter() - t0
+    out["cpu_s"] = time.process_time() - c0
     return out
 
 
@@ -273,8 +278,10 @@ def run_items(
     desc : str
         The bar's label.
     on_result : callable, optional
-        Called in this process with every :class:`ItemResult` as it finishes (after it is
-        stored), in completion order; skipped items first.
+        Called in this process with every :class:`ItemResult` as it finishes, in completion
+        order, skipped items first; called *before* the result is appended to the store, so
+        whatever it writes (the batch's ``summary.csv`` row) is on disk no later than the
+        record that makes a re-run skip the item.
     ray_init_kwargs : dict, optional
         Extra keywords for ``ray.init`` when the runner starts or joins Ray; ``runtime_env``
         ``env_vars`` are added to :data:`THREAD_ENV` (e.g. a ``PYTHONPATH`` for the workers).
@@ -311,18 +318,19 @@ def run_items(
     for i, (k, fp) in enumerate(zip(keys, prints)):
         old = done.get(k)
         if old is not None and old.status in ("ok", "skipped") and old.fingerprint == fp:
-            results[i] = ItemResult(k, "skipped", old.result, "", old.runtime_s, old.worker, old.node, fp, old.finished_at)
+            results[i] = ItemResult(k, "skipped", old.result, "", old.runtime_s, old.cpu_s, old.worker, old.node, fp,
+                                    old.finished_at)  # fmt: skip
         else:
             todo.append(i)
 
     def record(i: int, out: dict) -> None:
         rec = ItemResult(keys[i], out["status"], out.get("result"), out.get("error", ""), float(out.get("runtime_s", "nan")),
-                         out.get("worker", ""), out.get("node", ""), prints[i], time.time())  # fmt: skip
+                         float(out.get("cpu_s", "nan")), out.get("worker", ""), out.get("node", ""), prints[i], time.time())  # fmt: skip
         results[i] = rec
+        if on_result is not None:  # first: what it writes is on disk no later than the store's record
+            on_result(rec)
         if store is not None:
             store.append(rec)
-        if on_result is not None:
-            on_result(rec)
 
     bar = _progress(n, desc, progress, initial=n - len(todo))
     try:

@@ -74,10 +74,12 @@ def _mf4_channels(path: Path, source: str) -> tuple[list[str], Callable[[str], R
     names = [n for n in mdf.channels_db if n != "time"]
 
     def get(name: str) -> RawChannel:
+        if name not in mdf.channels_db:
+            raise KeyError(name)
         try:
             sig = mdf.get(name)
-        except Exception as exc:  # noqa: BLE001
-            raise KeyError(name) from exc
+        except Exception as exc:  # noqa: BLE001 - e.g. the name occurs in several channel groups
+            raise LogFormatError(f"{source}: channel {name!r} cannot be read: {exc}") from None
         return RawChannel(name, np.asarray(sig.timestamps, dtype=float), np.asarray(sig.samples, dtype=float),
                           sig.unit or None)  # fmt: skip
 
@@ -109,8 +111,8 @@ def _parquet_channels(path: Path, source: str) -> tuple[list[str], Callable[[str
             unit = {"s": "s", "ms": "ms", "us": "us", "ns": "ns"}[fld.type.unit]
         else:
             try:
-                values = col.to_numpy(zero_copy_only=False).astype(float)
-            except (TypeError, ValueError) as exc:
+                values = col.cast(pa.float64()).to_numpy(zero_copy_only=False).astype(float)  # null -> NaN
+            except (TypeError, ValueError, pa.ArrowException) as exc:
                 raise LogFormatError(f"{source}: column {name!r} is not numeric ({fld.type}): {exc}") from None
         return RawChannel(name, None, values, unit)
 
