@@ -30,6 +30,10 @@ import math
 import numpy as np
 from numba import njit
 
+# truth plant state vector: the error state [e1, e1_dot, e2, e2_dot] (dynamics.StateIndex), then
+# the front/rear tire relaxation lags (slip) [rad]
+S_E1, S_E1_DOT, S_E2, S_E2_DOT, S_LAG_F, S_LAG_R = range(6)
+N_PLANT_STATE = 6
 # vehicle vector
 V_M, V_IZ, V_LF, V_LR, V_CF, V_CR, V_HCG, V_TRACK, V_FZF, V_FZR = range(10)
 N_VEHICLE = 10
@@ -51,6 +55,8 @@ N_EFFECTS = 8
 # camera parameter vector and state vector
 CAM_RATE, CAM_LATENCY, CAM_E1_BIAS, CAM_E2_BIAS = range(4)
 CAMS_NEXT, CAMS_LATEST_E1, CAMS_LATEST_E2, CAMS_LATEST_TIME = range(4)
+# camera queue of taken frames, a row each: delivery time, time taken [s], e1 [m], e2 [rad] (NaN: dropped)
+PEND_DUE, PEND_TAKEN, PEND_E1, PEND_E2 = range(4)
 # camera counters (int64): noise index, pending head, pending count
 CAMC_NOISE, CAMC_HEAD, CAMC_COUNT = range(3)
 # driver parameter vector: gain, lookahead time, integral gain, max steering, L, K_us, lr, lf m/(2 Cr L)
@@ -142,12 +148,13 @@ def bicycle_rhs(e1d, e2, e2d, laf, lar, delta, vx, ax, pdd, pddd, veh, tf, tr, t
 
 @njit(cache=True)
 def bicycle_rk4_step(state, delta, dt, p0, p1, p2, q0, q1, q2, vx, ax, veh, tf, tr, tabf, tabr, eff):
-    """One classical RK4 step of the truth bicycle model, in place on ``state`` (6,).
+    """One classical RK4 step of the truth bicycle model, in place on ``state`` (6,) (``S_*`` layout).
 
     ``p0..p2`` / ``q0..q2``: desired yaw rate / acceleration at the start, middle and end.
     Returns the truth at the start of the step: ``alpha_f, alpha_r, F_yf, F_yr, yaw_rate, ay``.
     """
-    e1, e1d, e2, e2d, laf, lar = state[0], state[1], state[2], state[3], state[4], state[5]
+    e1, e1d, e2, e2d = state[S_E1], state[S_E1_DOT], state[S_E2], state[S_E2_DOT]
+    laf, lar = state[S_LAG_F], state[S_LAG_R]
     h = 0.5 * dt
     vm = vx + h * ax
     a1, b1, c1, d1, af, ar, Fyf, Fyr = bicycle_rhs(e1d, e2, e2d, laf, lar, delta, vx, ax, p0, q0, veh, tf, tr, tabf, tabr, eff)
@@ -158,12 +165,12 @@ def bicycle_rk4_step(state, delta, dt, p0, p1, p2, q0, q1, q2, vx, ax, veh, tf, 
     v4, w4 = e1d + dt * a3, e2d + dt * b3
     a4, b4, c4, d4, _, _, _, _ = bicycle_rhs(v4, e2 + dt * w3, w4, laf + dt * c3, lar + dt * d3, delta, vx + dt * ax, ax, p2, q2, veh, tf, tr, tabf, tabr, eff)
     c = dt / 6.0
-    state[0] = e1 + c * (e1d + 2.0 * v2 + 2.0 * v3 + v4)
-    state[1] = e1d + c * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-    state[2] = e2 + c * (e2d + 2.0 * w2 + 2.0 * w3 + w4)
-    state[3] = e2d + c * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
-    state[4] = laf + c * (c1 + 2.0 * c2 + 2.0 * c3 + c4)
-    state[5] = lar + c * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
+    state[S_E1] = e1 + c * (e1d + 2.0 * v2 + 2.0 * v3 + v4)
+    state[S_E1_DOT] = e1d + c * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+    state[S_E2] = e2 + c * (e2d + 2.0 * w2 + 2.0 * w3 + w4)
+    state[S_E2_DOT] = e2d + c * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
+    state[S_LAG_F] = laf + c * (c1 + 2.0 * c2 + 2.0 * c3 + c4)
+    state[S_LAG_R] = lar + c * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
     return af, ar, Fyf, Fyr, e2d + p0, (Fyf + Fyr + eff[X_WIND_F]) / veh[V_M]
 
 
@@ -195,14 +202,14 @@ def camera_tick(t, e1, e2, cam, cstate, counters, pending, noise, drop):
         counters[CAMC_NOISE] = i + 1
         cap = pending.shape[0]
         slot = (counters[CAMC_HEAD] + counters[CAMC_COUNT]) % cap
-        pending[slot, 0] = t + cam[CAM_LATENCY]
-        pending[slot, 1] = t
+        pending[slot, PEND_DUE] = t + cam[CAM_LATENCY]
+        pending[slot, PEND_TAKEN] = t
         if drop[i]:
-            pending[slot, 2] = math.nan
-            pending[slot, 3] = math.nan
+            pending[slot, PEND_E1] = math.nan
+            pending[slot, PEND_E2] = math.nan
         else:
-            pending[slot, 2] = e1 + cam[CAM_E1_BIAS] + noise[i, 0]
-            pending[slot, 3] = e2 + cam[CAM_E2_BIAS] + noise[i, 1]
+            pending[slot, PEND_E1] = e1 + cam[CAM_E1_BIAS] + noise[i, 0]
+            pending[slot, PEND_E2] = e2 + cam[CAM_E2_BIAS] + noise[i, 1]
         counters[CAMC_COUNT] += 1
         period = 1.0 / cam[CAM_RATE]
         cstate[CAMS_NEXT] += period
@@ -212,15 +219,15 @@ def camera_tick(t, e1, e2, cam, cstate, counters, pending, noise, drop):
     d1 = math.nan
     d2 = math.nan
     cap = pending.shape[0]
-    while counters[CAMC_COUNT] > 0 and t >= pending[counters[CAMC_HEAD], 0] - _EPS:
+    while counters[CAMC_COUNT] > 0 and t >= pending[counters[CAMC_HEAD], PEND_DUE] - _EPS:
         h = counters[CAMC_HEAD]
         delivered = True
-        d1 = pending[h, 2]
-        d2 = pending[h, 3]
+        d1 = pending[h, PEND_E1]
+        d2 = pending[h, PEND_E2]
         if d1 == d1:
             cstate[CAMS_LATEST_E1] = d1
             cstate[CAMS_LATEST_E2] = d2
-            cstate[CAMS_LATEST_TIME] = pending[h, 1]
+            cstate[CAMS_LATEST_TIME] = pending[h, PEND_TAKEN]
         counters[CAMC_HEAD] = (h + 1) % cap
         counters[CAMC_COUNT] -= 1
     return delivered, d1, d2
@@ -276,10 +283,10 @@ def guard_steering(delta, delta_prev, guard):
 @njit(cache=True, inline="always")
 def record_true_state(out, j, state):
     """Write the true error state ``state[:4]`` (before the step) into row ``j`` of a tick log."""
-    out[j, LOG_TRUE_E1] = state[0]
-    out[j, LOG_TRUE_E1_DOT] = state[1]
-    out[j, LOG_TRUE_E2] = state[2]
-    out[j, LOG_TRUE_E2_DOT] = state[3]
+    out[j, LOG_TRUE_E1] = state[S_E1]
+    out[j, LOG_TRUE_E1_DOT] = state[S_E1_DOT]
+    out[j, LOG_TRUE_E2] = state[S_E2]
+    out[j, LOG_TRUE_E2_DOT] = state[S_E2_DOT]
 
 
 @njit(cache=True, inline="always")
@@ -475,7 +482,7 @@ def advance_ticks(
         k1, dk1 = curvature_at(s + 0.5 * dt * vx + 0.125 * dt * dt * ax, curve_source, curve_a, curve_b, curve_ds)
         s_end = s + 0.5 * dt * (vx + vx_end)
         k2, dk2 = curvature_at(s_end, curve_source, curve_a, curve_b, curve_ds)
-        delivered, f1, f2 = camera_tick(t, state[0], state[2], cam, cstate, counters, pending, noise, drop)
+        delivered, f1, f2 = camera_tick(t, state[S_E1], state[S_E2], cam, cstate, counters, pending, noise, drop)
         delta_prev = delta
         if steering != steering:
             kp = k0
@@ -502,7 +509,10 @@ def advance_ticks(
             vx, ax, veh, tf, tr, tabf, tabr, eff,
         )  # fmt: skip
         if not (
-            math.isfinite(state[0]) and math.isfinite(state[1]) and math.isfinite(state[2]) and math.isfinite(state[3])
+            math.isfinite(state[S_E1])
+            and math.isfinite(state[S_E1_DOT])
+            and math.isfinite(state[S_E2])
+            and math.isfinite(state[S_E2_DOT])
         ):
             return s, vx, delta, j, STOP_BLOWUP
         guard[GUARD_AY] = ay

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .params import ParameterError, VehicleParams, _Params
-from ._kernels import bicycle_rhs, bicycle_rk4_step
+from ._kernels import S_E1, S_E1_DOT, S_E2, S_E2_DOT, bicycle_rhs, bicycle_rk4_step
 from .tires import TireModel
 
 __all__ = [
@@ -40,12 +40,13 @@ __all__ = [
 
 
 class StateIndex(IntEnum):
-    """Names of the error-state components."""
+    """Names of the error-state components (also the first four entries of a plant's ``state``,
+    :data:`~._kernels.S_E1` ... in the compiled kernels)."""
 
-    E1 = 0  # lateral offset [m]
-    E1_DOT = 1  # lateral offset rate [m/s]
-    E2 = 2  # heading error [rad]
-    E2_DOT = 3  # heading error rate [rad/s]
+    E1 = S_E1  # lateral offset [m]
+    E1_DOT = S_E1_DOT  # lateral offset rate [m/s]
+    E2 = S_E2  # heading error [rad]
+    E2_DOT = S_E2_DOT  # heading error rate [rad/s]
 
 
 STATE_NAMES = ("e1", "e1_dot", "e2", "e2_dot")
@@ -293,7 +294,7 @@ class BicyclePlant:
         if not np.all(np.isfinite(xi)):
             raise ValueError(f"initial state must be finite, got {xi}")
         self.state[:] = 0.0
-        self.state[:4] = xi
+        self.state[S_E1 : S_E2_DOT + 1] = xi
         self._last_inputs = (0.0, self.vehicle.vx, 0.0, 0.0, 0.0)
 
     def step(
@@ -361,7 +362,7 @@ class BicyclePlant:
     @property
     def xi(self) -> NDArray:
         """Current error state ``[e1, e1_dot, e2, e2_dot]``."""
-        return self.state[:4].copy()
+        return self.state[S_E1 : S_E2_DOT + 1].copy()
 
     def true_axle_curve(self, alpha: ArrayLike, axle: str) -> NDArray:
         """Steady-state truth axle force [N] at slip ``alpha`` (tire times stiffness scale)."""

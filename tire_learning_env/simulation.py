@@ -39,7 +39,7 @@ from ._kernels import (
     road_lookup,
 )
 from .driver import LaneKeepingDriver
-from .dynamics import BicyclePlant, PlantEffects
+from .dynamics import BicyclePlant, PlantEffects, StateIndex
 from .params import CameraParams, DriverParams, ParameterError, RoadParams, TireParams, VehicleParams
 from .roads import Road, make_road
 from .sensors import Camera
@@ -138,15 +138,15 @@ class SimulationLog:
         if include_truth:
             x = self.truth["true_state"]
             cols.update(
-                true_e1=x[:, 0],
-                true_e1_dot=x[:, 1],
-                true_e2=x[:, 2],
-                true_e2_dot=x[:, 3],
+                true_e1=x[:, StateIndex.E1],
+                true_e1_dot=x[:, StateIndex.E1_DOT],
+                true_e2=x[:, StateIndex.E2],
+                true_e2_dot=x[:, StateIndex.E2_DOT],
                 true_alpha_f=self.truth["true_slip"][:, 0],
                 true_alpha_r=self.truth["true_slip"][:, 1],
                 true_Fyf=self.truth["true_force"][:, 0],
                 true_Fyr=self.truth["true_force"][:, 1],
-                true_vy=x[:, 1] - s["vx"] * x[:, 2],
+                true_vy=x[:, StateIndex.E1_DOT] - s["vx"] * x[:, StateIndex.E2],
             )
             cols["true_beta"] = np.arctan2(cols["true_vy"], s["vx"])
         return cols
@@ -374,7 +374,7 @@ def advance_ticks_python(
         s_end = s + 0.5 * dt * (vx + vx_end)
         k2, dk2 = curvature(s_end)
         state = plant.state
-        frame = camera.tick(t, state[0], state[2])
+        frame = camera.tick(t, state[StateIndex.E1], state[StateIndex.E2])
         delta_prev = delta
         if steering != steering:
             e1m, e2m = camera.latest

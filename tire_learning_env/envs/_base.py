@@ -28,6 +28,7 @@ __all__ = [
     "OBSERVATION_NAMES",
     "OBSERVATION_BOUNDS",
     "NO_FRAME_AGE",
+    "COMMON_CONFIG_KEYS",
     "PARAM_TYPES",
     "observation_bounds",
     "whole_rate_ratio",
@@ -49,6 +50,23 @@ OBSERVATION_BOUNDS: dict[str, tuple[float, float] | None] = {
 
 #: Frame age observed before the camera delivered its first frame [s] (the bound: saturated).
 NO_FRAME_AGE = 10.0
+
+#: Config keys every env accepts (each adds its own: a road, a scene, the multi-body parameters).
+COMMON_CONFIG_KEYS = (
+    "vehicle",
+    "tire",
+    "tire_model",
+    "tires",
+    "camera",
+    "driver",
+    "effects",
+    "physics_rate",
+    "policy_rate",
+    "action_mode",
+    "max_steering_offset",
+    "departure_threshold",
+    "initial_state_std",
+)
 
 #: Config entry -> the parameter dataclass it is coerced to (an instance or a dict).
 PARAM_TYPES: dict[str, type] = {

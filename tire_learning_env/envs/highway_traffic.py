@@ -20,6 +20,14 @@ from .._kernels import (
     CURVATURE_KNOTS,
     LOG_AX,
     N_LOG,
+    PEND_E1,
+    PEND_E2,
+    S_E1,
+    S_E1_DOT,
+    S_E2,
+    S_E2_DOT,
+    S_LAG_F,
+    S_LAG_R,
     STOP_BLOWUP,
     STOP_HANDOVER,
     advance_ticks,
@@ -32,7 +40,7 @@ from ..driver import LaneKeepingDriver
 from ..params import ParameterError, VehicleParams, check_keys
 from ..sensors import Camera
 from ..simulation import Plant, advance_ticks_python, log_from_rows
-from ._base import TireLearningEnv, whole_rate_ratio
+from ._base import COMMON_CONFIG_KEYS, TireLearningEnv, whole_rate_ratio
 from .highway_decisions import EgoDecisions
 from .highway_ego import TruthEgoVehicle
 from .highway_lanes import SWITCH_JOIN, SWITCH_LANE_CHANGE, LaneReference, wrap_angle
@@ -59,21 +67,8 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
     #: Steepest heading of a lane-change path [rad]: sets its length at low speed.
     LANE_CHANGE_MAX_HEADING = 0.12
 
-    _COMMON_KEYS = (
-        "vehicle",
-        "tire",
-        "tire_model",
-        "tires",
-        "camera",
-        "driver",
-        "effects",
-        "physics_rate",
-        "policy_rate",
+    _COMMON_KEYS = COMMON_CONFIG_KEYS + (
         "traffic_frequency",
-        "action_mode",
-        "max_steering_offset",
-        "departure_threshold",
-        "initial_state_std",
         "lane_change",
         "lane_change_time",
         "vehicles_count",
@@ -247,7 +242,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         log = self._as_logs(out)
         terminated = bool(self.crashed or self.departed)
         truncated = bool(self._end_of_road() and not terminated)
-        e1 = self.plant.state[0]
+        e1 = self.plant.state[S_E1]
         e1_ref = lane_change_reference(self.s, *self._lc)[0]
         reward = -1.0 if self.crashed else float(1.0 - ((e1 - e1_ref) / self.departure_threshold) ** 2)
         info = self._info_now()
@@ -353,7 +348,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
     def _pose(self) -> tuple[NDArray, float]:
         lane = self.network.get_lane(self.target_lane)
         x = self.plant.state
-        return lane.position(self.s, float(x[0])), float(lane.heading_at(self.s) + x[2])
+        return lane.position(self.s, float(x[S_E1])), float(lane.heading_at(self.s) + x[S_E2])
 
     def _switch_target(self, new_index: tuple, kind: int, row: int) -> float:
         """Re-express the physical state relative to lane ``new_index``; returns the ``e1`` jump [m].
@@ -364,7 +359,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         and ``e1``, ``e2`` change by the join's lateral offset and heading mismatch only.
         """
         x = self.plant.state
-        e1, e1d, e2, e2d = (float(v) for v in x[:4])
+        e1, e1d, e2, e2d = (float(x[i]) for i in (S_E1, S_E1_DOT, S_E2, S_E2_DOT))
         k_old = self.reference.kappa(self.target_lane, self.s)
         if kind == SWITCH_JOIN:
             h = self.reference.handover(self.target_lane)
@@ -379,10 +374,10 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         k_new = self.reference.kappa(new_index, s_new)
         vy = e1d - self.vx * e2  # lateral velocity: the same in every lane frame
         r = e2d + self.vx * k_old  # yaw rate: idem
-        x[0] = e1_new
-        x[1] = vy + self.vx * e2_new
-        x[2] = e2_new
-        x[3] = r - self.vx * k_new
+        x[S_E1] = e1_new
+        x[S_E1_DOT] = vy + self.vx * e2_new
+        x[S_E2] = e2_new
+        x[S_E2_DOT] = r - self.vx * k_new
         d_e1, d_e2 = e1_new - e1, e2_new - e2
         self._shift_camera(d_e1, d_e2)
         if kind == SWITCH_JOIN:  # keep the lane-change path's progress across the hand-over
@@ -406,11 +401,11 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         cap = pending.shape[0]
         for k in range(int(counters[CAMC_COUNT])):
             slot = (int(counters[CAMC_HEAD]) + k) % cap
-            pending[slot, 2] += d_e1  # NaN (dropped frame) stays NaN
-            pending[slot, 3] += d_e2
+            pending[slot, PEND_E1] += d_e1  # NaN (dropped frame) stays NaN
+            pending[slot, PEND_E2] += d_e2
 
     def _check_departure(self) -> None:
-        e1 = float(self.plant.state[0])
+        e1 = float(self.plant.state[S_E1])
         d = self.departure_threshold
         o = self._corridor_origin
         if o != 0.0 and self.s >= self._lc[1] + self._lc[2] and abs(e1) < d:
@@ -440,7 +435,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
     def _traffic_observation(self) -> NDArray:
         """``[present, ds, dl, dv]`` of the nearest vehicles in the target lane's frame."""
         lane = self.network.get_lane(self.target_lane)
-        e1 = float(self.plant.state[0])
+        e1 = float(self.plant.state[S_E1])
         rows = []
         for v in self.road.vehicles:
             if v is self.ego:
@@ -464,7 +459,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
             delta, ax = self._last_tick if self._last_tick is not None else (self.last_delta, self.ax)
             kappa = self.reference.kappa(self.target_lane, self.s)
             *_, af, ar, Fyf, Fyr = bicycle_rhs(
-                x[1], x[2], x[3], x[4], x[5], delta, self.vx, ax, self.vx * kappa, 0.0, *self.plant.kernel_params()
+                x[S_E1_DOT], x[S_E2], x[S_E2_DOT], x[S_LAG_F], x[S_LAG_R], delta, self.vx, ax, self.vx * kappa, 0.0, *self.plant.kernel_params()
             )
             slip, force = np.array([af, ar]), np.array([Fyf, Fyr])
         elif hasattr(self.plant, "output"):
@@ -473,7 +468,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         else:
             return {}
         return {
-            "true_state": x[:4].copy(),
+            "true_state": x[[S_E1, S_E1_DOT, S_E2, S_E2_DOT]],
             "true_slip": slip,
             "true_force": force,
             "true_force_nonlinear": force - slip * np.array([2.0 * veh.Cf, 2.0 * veh.Cr]),

@@ -7,13 +7,13 @@ from typing import Any, Callable, Mapping
 import numpy as np
 from numpy.typing import NDArray
 
-from ..dynamics import PlantEffects
+from ..dynamics import PlantEffects, StateIndex
 from ..params import CameraParams, DriverParams, RoadParams, TireParams, VehicleParams
 from ..rendering import TopDownRenderer
 from ..roads import Road, make_road
 from ..simulation import Plant, SimulationLog, Simulator
 from ..tires import TireModel
-from ._base import OBSERVATION_NAMES, TireLearningEnv
+from ._base import COMMON_CONFIG_KEYS, OBSERVATION_NAMES, TireLearningEnv
 
 __all__ = ["LaneKeepingEnv", "OBSERVATION_NAMES"]
 
@@ -97,23 +97,7 @@ class LaneKeepingEnv(TireLearningEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
-    _CONFIG_KEYS = (
-        "road",
-        "vehicle",
-        "tire",
-        "tire_model",
-        "tires",
-        "camera",
-        "driver",
-        "effects",
-        "road_params",
-        "physics_rate",
-        "policy_rate",
-        "action_mode",
-        "max_steering_offset",
-        "departure_threshold",
-        "initial_state_std",
-    )
+    _CONFIG_KEYS = ("road", "road_params") + COMMON_CONFIG_KEYS
 
     def __init__(
         self,
@@ -187,7 +171,7 @@ class LaneKeepingEnv(TireLearningEnv):
         else:
             log = self.sim.advance(self.ticks_per_step, steering=value)
         self._last_log = log
-        e1_true = self.sim.plant.state[0]
+        e1_true = self.sim.plant.state[StateIndex.E1]
         terminated = bool(abs(e1_true) > self.departure_threshold)
         reward = float(1.0 - (e1_true / self.departure_threshold) ** 2)
         info = self._info_now()
@@ -201,7 +185,9 @@ class LaneKeepingEnv(TireLearningEnv):
         if self._renderer is None:
             self._renderer = TopDownRenderer(self.road)
         x = self.sim.plant.state
-        return self._renderer.render(self.sim.s, x[0], x[2], self.vehicle.wheelbase + 1.8, self.vehicle.width)
+        return self._renderer.render(
+            self.sim.s, x[StateIndex.E1], x[StateIndex.E2], self.vehicle.wheelbase + 1.8, self.vehicle.width
+        )
 
     def set_plant(self, plant: Plant) -> None:
         """Use ``plant`` as the truth vehicle (here and in the simulator) from the next :meth:`reset` on."""
