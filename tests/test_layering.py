@@ -1,0 +1,96 @@
+"""No module of the package imports from a layer above its own (DEVELOPING.md, "Data flow").
+
+Every ``import`` / ``from ... import`` is read with :mod:`ast`, including those inside
+functions (a deferred import is still a dependency). Imports of the package root
+(``tire_learning_env`` itself: the version, the id registration) are allowed from anywhere.
+"""
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "tire_learning_env"
+
+#: The layers, lowest first: a module may import from its own layer and the layers before it.
+#: Keep in step with the "Data flow" section of DEVELOPING.md.
+LAYERS = (
+    ("params",),
+    ("metrics",),  # scoring functions: pure numpy, used by wrappers and the analysis alike
+    ("_kernels",),
+    ("tires",),
+    ("dynamics",),
+    ("roads",),
+    ("sensors", "driver", "rendering"),
+    ("simulation",),
+    ("high_order",),
+    ("envs", "registration"),
+    ("formats", "io"),
+    ("observer", "baselines"),
+    ("wrappers", "scripted"),
+    ("plotting", "studies", "report"),
+    ("imu", "discrepancy"),
+    ("fleet", "commands", "cli"),
+)
+RANK = {name: rank for rank, group in enumerate(LAYERS) for name in group}
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.with_suffix("").relative_to(PACKAGE.parent).parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imports(path: Path) -> set[str]:
+    """Absolute names of the package modules ``path`` imports (relative imports resolved)."""
+    module = _module_name(path)
+    package = module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target == "tire_learning_env" and node.level:  # "from .. import x": x may be a subpackage
+                found.update(f"{target}.{alias.name}" for alias in node.names)
+            else:
+                found.add(target)
+        elif isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+    return {name for name in found if name.split(".")[0] == "tire_learning_env"}
+
+
+def _layer_of(module: str) -> str | None:
+    """Top-level module or subpackage of ``module`` (``None`` for the package root)."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else None
+
+
+def test_every_module_has_a_layer():
+    tops = {path.stem if path.parent == PACKAGE else path.relative_to(PACKAGE).parts[0] for path in PACKAGE.rglob("*.py")}
+    tops.discard("__init__")
+    assert not sorted(tops - set(RANK)), "place these modules in LAYERS (tests/test_layering.py) and DEVELOPING.md"
+
+
+def test_no_module_imports_from_a_layer_above_it():
+    upward = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        source = _layer_of(_module_name(path))
+        if source is None:  # the package root registers the ids and re-exports
+            continue
+        for target in sorted(_imports(path)):
+            layer = _layer_of(target)
+            if layer is None or layer == source or layer not in RANK:
+                continue
+            if RANK[layer] > RANK[source]:
+                upward.append(f"{_module_name(path)} -> {target}")
+    assert not upward, "imports from a higher layer:\n" + "\n".join(upward)
+
+
+def test_the_check_sees_deferred_and_relative_imports(tmp_path):
+    """The parser resolves relative imports and finds imports inside functions."""
+    path = PACKAGE / "envs" / "lane_keeping.py"
+    found = _imports(path)
+    assert "tire_learning_env.simulation" in found and "tire_learning_env.envs._base" in found
+    assert "tire_learning_env.envs.highway_scenes" in _imports(PACKAGE / "envs" / "highway.py")
+    # a deferred import (inside a function) counts: wrappers/excitation.py imports the highway env lazily
+    assert "tire_learning_env.envs.highway" in _imports(PACKAGE / "wrappers" / "excitation.py")
