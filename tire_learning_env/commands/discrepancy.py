@@ -34,10 +34,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="friction coefficient of the nominal Pacejka tire (default 1.0)")
     p.add_argument("--window", type=float, default=None, help="multiple-shooting window [s] (default 3)")
     p.add_argument("--no-imu", action="store_true", help="ignore yaw_rate / ay even if the log has them")
-    p.add_argument("--steering", choices=["curvature", "linear", "hold"], default="curvature",
-                   help="steering between logged rows: curvature (default; a sampled controller with a "
+    p.add_argument("--steering", choices=["auto", "curvature", "linear", "hold"], default="auto",
+                   help="steering between logged rows: auto (default: curvature for rows at 40 Hz and more, else the "
+                   "better of curvature and linear on the nominal residual), curvature (a sampled controller with a "
                    "curvature feed-forward, like the simulator's driver; IMU-only logs have no curvature and use "
                    "linear), linear (a continuous signal, e.g. a human driver), hold")
+    p.add_argument("--no-input-noise", action="store_true",
+                   help="do not estimate the steering error between sparse rows (rows sparser than 40 Hz); the "
+                   "residual is then taken for measurement noise only")
     p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo null distributions")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
@@ -51,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
 
     log = read_log(args.log)  # LogFormatError names what is wrong
     vehicle = vehicle_from_args(args)  # ParameterError for an unreadable / invalid file
-    overrides = {"use_imu": not args.no_imu, "seed": args.seed, "steering": args.steering}
+    overrides = {"use_imu": not args.no_imu, "seed": args.seed, "steering": args.steering,
+                 "input_noise": not args.no_input_noise}
     if args.window is not None:
         overrides["window"] = args.window
     config = DiscrepancyConfig(**overrides)
@@ -61,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     summary = {
         "verdict": result.verdict,
         "effects": {e["name"]: e["parameters"] for e in result.effects},
+        **({"candidates": [c["name"] for c in result.candidates]} if result.verdict == "ambiguous" else {}),
         "gap_ratio": round(result.gap_ratio, 3),
         "runtime_s": round(result.runtime_s, 1),
     }

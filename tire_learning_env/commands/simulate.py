@@ -24,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--road", default="study1", choices=sorted(BUILTIN_ROADS) + sorted(DISCREPANCY_ROADS),
                    help="built-in road (default study1); identification = curves both ways + six lane changes, "
-                   "repeating every 1800 m")
+                   "repeating every 1800 m; curves = steady curves of R 250-400 m both ways, no lane changes, "
+                   "repeating every 2400 m")
     p.add_argument("--duration", type=positive_float, default=60.0, help="simulated time [s] (default 60)")
     p.add_argument("--tire", choices=["pacejka", "linear"], default="pacejka", help="truth tire model")
     p.add_argument("--mu", type=positive_float, default=TireParams().mu, help="Pacejka friction coefficient")
@@ -59,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     plant = hidden.make_plant(vehicle, *axle_tires(vehicle, args.tire, TireParams(mu=args.mu)))
     log = simulate(road, args.duration, vehicle=vehicle, camera=camera, physics_rate=args.physics_rate,
                    seed=args.seed, speed_profile=speed_profile(args.speed_profile, vehicle.vx), plant=plant)
-    cols = log.to_columns(include_truth=not args.no_truth)
+    cols = hidden.apply_to_sensors(log.to_columns(include_truth=not args.no_truth))
     step = max(int(round(args.physics_rate / args.log_rate)), 1)
     keep = _rows_to_keep(cols["e1"], step)
     from ..io import check_output_file, current_run_context

@@ -51,10 +51,16 @@ from .._kernels import V_HCG, V_IZ, V_LF, V_LR, V_M, V_TRACK, tire_force
     TH_ACC_OFFSET,  # accelerometer position ahead of the CG [m]
     TH_STEER_DELAY,  # steering signal delay relative to the IMU [s]
     TH_AY_SCALE,  # lateral accelerometer scale error (roll-induced gravity component) [-]
-) = range(21)
-N_THETA = 21
+    # road geometry and sensor/steering effects of the camera model (issue 18)
+    TH_SUPER_RATE,  # superelevation per unit path curvature [rad m] (the outer edge raised)
+    TH_SUPER_CAP,  # largest superelevation [rad]
+    TH_E2_DRIFT,  # drift rate of the camera heading bias [rad/s] (about each window's middle)
+    TH_STEER_RATIO,  # steering-ratio error: road-wheel angle = (1 + this) * logged delta [-]
+) = range(25)
+N_THETA = 25
 THETA_NOMINAL = np.array(
-    [0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+    [0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0,
+     0.0, 0.1, 0.0, 0.0]
 )
 
 # measurement channels
@@ -83,6 +89,26 @@ RELAX_MIN = 0.01
 
 
 @njit(cache=True, nogil=True)
+def road_bank(th, kappa):
+    """Bank angle of the road [rad] (positive raises the left edge) at path curvature ``kappa`` [1/m].
+
+    A constant crossfall ``th[TH_BANK]`` plus the superelevation of a curve, which raises the
+    outer edge in proportion to the curvature up to a cap (road design:
+    ``e = min(rate |kappa|, e_max)``): ``crossfall - sign(kappa) min(rate |kappa|, cap)``.
+    """
+    rate = th[TH_SUPER_RATE]
+    if rate == 0.0:
+        return th[TH_BANK]
+    e = abs(rate * kappa)
+    cap = th[TH_SUPER_CAP]
+    if e > cap:
+        e = cap
+    if rate * kappa > 0.0:
+        return th[TH_BANK] - e
+    return th[TH_BANK] + e
+
+
+@njit(cache=True, nogil=True)
 def model_rhs(e1d, e2, e2d, laf, lar, delta, vx, ax, pdd, pddd, veh, tf, tr, tabf, tabr, th):
     """Augmented bicycle right-hand side in error coordinates (SPEC §1, eqs. 1, 5, 13).
 
@@ -92,7 +118,8 @@ def model_rhs(e1d, e2, e2d, laf, lar, delta, vx, ax, pdd, pddd, veh, tf, tr, tab
     m, Iz, lf, lr = veh[V_M], veh[V_IZ], veh[V_LF], veh[V_LR]
     vy = e1d - vx * e2
     r = e2d + pdd
-    af = delta + th[TH_STEER_OFFSET] - (vy + lf * r) / vx  # eq. (13) + steering offset
+    # eq. (13) + steering offset and steering-ratio error
+    af = delta * (1.0 + th[TH_STEER_RATIO]) + th[TH_STEER_OFFSET] - (vy + lf * r) / vx
     ar = (lr * r - vy) / vx
     gain_f = th[TH_SCALE_F] * (1.0 - th[TH_SPEED_COEF] * vx * vx)
     gain_r = th[TH_SCALE_R] * (1.0 - th[TH_SPEED_COEF] * vx * vx)
@@ -116,7 +143,7 @@ def model_rhs(e1d, e2, e2d, laf, lar, delta, vx, ax, pdd, pddd, veh, tf, tr, tab
         fac = 1.0 - 0.5 * lt * rf * rf
         Fyf *= fac
         Fyr *= fac
-    f_ext = th[TH_WIND] - m * _G * math.sin(th[TH_BANK])
+    f_ext = th[TH_WIND] - m * _G * math.sin(road_bank(th, pdd / vx))
     e1dd = (Fyf + Fyr + f_ext) / m - vx * pdd + ax * e2  # eq. (1)
     e2dd = (lf * Fyf - lr * Fyr) / Iz - pddd  # eq. (5)
     return e1dd, e2dd, dlaf, dlar, af, ar, Fyf, Fyr
@@ -159,7 +186,7 @@ def simulate_rows(x0, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr
     v0 = vx[j0]
     vy0 = e1d - v0 * e2
     r0 = e2d + pdd[j0]
-    laf = delta[j0] + th[TH_STEER_OFFSET] - (vy0 + veh[V_LF] * r0) / v0
+    laf = delta[j0] * (1.0 + th[TH_STEER_RATIO]) + th[TH_STEER_OFFSET] - (vy0 + veh[V_LF] * r0) / v0
     lar = (veh[V_LR] * r0 - vy0) / v0
     m = veh[V_M]
     n = j1 - j0 + 1
@@ -256,6 +283,8 @@ def predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, out):
     """
     tau = th[TH_LATENCY]
     n = traj.shape[0]
+    # the heading-bias drift is measured about the middle of the log's time span, t_mid
+    t_mid = 0.5 * (t[0] + t[t.shape[0] - 1])
     for mi in range(m0, m1):
         o = mi - m0
         j = meas_row[mi]
@@ -286,7 +315,7 @@ def predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, out):
         else:
             val = traj[k, OUT_E1] if ch == CH_E1 else traj[k, OUT_E2]
         if ch == CH_E2:
-            val += th[TH_E2_BIAS]
+            val += th[TH_E2_BIAS] + th[TH_E2_DRIFT] * (t[j] - t_mid)
         out[o] = val
 
 
@@ -307,8 +336,8 @@ def window_residuals(
     - 0: ``n_iter`` steps, Jacobian at the guess (``1 + 3 + n_iter`` simulations);
     - 1: ``n_iter`` steps with the given ``jac`` (``1 + n_iter`` simulations), a
       fixed-Jacobian Gauss-Newton (the score statistic's secants);
-    - 2: converge: fresh Jacobian every step, at most ``n_iter`` steps, stop when every
-      step component is below ``tol``.
+    - 2: converge: fresh Jacobian on the first two steps, then fixed, at most ``n_iter``
+      steps, stop when every step component is below ``tol``.
 
     Fills ``resid`` (M,), the fitted initial states ``x0_out`` (W, 4) and the weighted
     Jacobian of the predictions w.r.t. the initial state ``jac`` (M, 4) (used for the
@@ -326,6 +355,7 @@ def window_residuals(
         pert = np.empty(nm)
         x = x0_guess[w].copy()
         ok = True
+        far = True
         for it in range(n_iter + 1):
             good = simulate_rows(x, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, traj)
             predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, base)
@@ -334,7 +364,10 @@ def window_residuals(
                 break
             if it == n_iter:
                 break
-            if (it == 0 and mode == 0) or mode == 2:
+            # mode 2 refreshes the Jacobian on the first two steps and while the steps are large: the model is
+            # nearly linear in its initial state, so later steps with the Jacobian of an almost converged state
+            # land on the same optimum (to second order) at a quarter of the cost
+            if (it == 0 and mode == 0) or (mode == 2 and (it < 2 or far)):
                 for mi in range(m0, m1):
                     jac[mi, 0] = meas_w[mi] if meas_chan[mi] == CH_E1 else 0.0
                 for q in range(1, 4):
@@ -369,6 +402,10 @@ def window_residuals(
             for a in range(4):
                 if abs(dx[a]) * shrink > max_step[a]:
                     shrink = max_step[a] / abs(dx[a])
+            far = False
+            for a in range(4):
+                if abs(dx[a]) > 1e3 * tol[a]:
+                    far = True
             for a in range(4):
                 x[a] += shrink * dx[a]
         for a in range(4):
@@ -379,3 +416,46 @@ def window_residuals(
         else:
             for mi in range(m0, m1):
                 resid[mi] = 1e3  # a diverged simulation: huge but finite residual
+
+
+@njit(cache=True, parallel=True)
+def steering_sensitivity(
+    th, x0, win_sim, win_end, meas_ptr, meas_row, meas_chan, meas_w, blk_ptr, blk_rows,
+    t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr, h_max, h, out,
+):  # fmt: skip
+    """Weighted sensitivity of every window's predictions to a steering error held over a block of rows.
+
+    For window ``w`` and block ``b`` (blocks ``blk_ptr[w]..blk_ptr[w+1]-1``, each the rows
+    ``blk_rows[b, 0] .. blk_rows[b, 1] - 1``, i.e. the intervals that start on them), the
+    road-wheel angle is raised by ``h`` [rad] over the block's intervals and the window is
+    simulated from its fitted state ``x0[w]`` (the initial state held). Fills
+    ``out[m, b - blk_ptr[w]]`` = ``meas_w[m] d y_model[m] / d e_b`` for the window's
+    measurements ``m`` (``out`` has as many columns as the largest block count).
+    Used by :mod:`.noise` for the errors-in-variables model of the steering between rows.
+    """
+    n_win = win_sim.shape[0]
+    for w in prange(n_win):
+        j0 = win_sim[w]
+        j1 = win_end[w]
+        m0 = meas_ptr[w]
+        m1 = meas_ptr[w + 1]
+        nm = m1 - m0
+        traj = np.empty((j1 - j0 + 1, N_OUT))
+        base = np.empty(nm)
+        pert = np.empty(nm)
+        dl = delta.copy()
+        xw = x0[w].copy()
+        simulate_rows(xw, j0, j1, t, dl, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, traj)
+        predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, base)
+        for b in range(blk_ptr[w], blk_ptr[w + 1]):
+            ra = blk_rows[b, 0]
+            rb = blk_rows[b, 1]
+            for j in range(ra, rb):
+                dl[j] += h
+            simulate_rows(xw, j0, j1, t, dl, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, traj)
+            predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, pert)
+            for j in range(ra, rb):
+                dl[j] = delta[j]
+            col = b - blk_ptr[w]
+            for mi in range(m0, m1):
+                out[mi, col] = meas_w[mi] * (pert[mi - m0] - base[mi - m0]) / h

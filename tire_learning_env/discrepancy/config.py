@@ -50,9 +50,23 @@ class DiscrepancyConfig(_Params):
         [m/s^2] (a noise-free channel is weighted as if it had this noise).
     use_imu : bool
         Use ``yaw_rate`` / ``ay`` when the log has them.
-    steering : {"curvature", "linear", "hold"}
+    steering : {"auto", "curvature", "linear", "hold"}
         How the steering evolves between logged rows (:func:`.data.steering_slope`);
-        IMU-only logs have no curvature and use ``linear`` instead of ``curvature``.
+        ``auto`` (default) takes whichever of ``curvature`` and ``linear`` leaves the smaller
+        nominal residual (a sampled controller logged at its own rate, or a continuous
+        steering / a log sparser than the controller). IMU-only logs have no curvature and
+        use ``linear`` instead of ``curvature`` / ``auto``.
+    input_noise : bool
+        Estimate the steering error between logged rows from the log and account for it
+        (:mod:`.noise`, errors-in-variables); off: the residual is assumed to be measurement
+        noise only.
+    ambiguity_bic : float
+        Two candidates whose BIC differ by less than this (both passing the acceptance test)
+        explain the log about equally well: the verdict is ``ambiguous`` (Kass and Raftery:
+        a BIC difference above 10 is "very strong" evidence).
+    verify_separation : bool
+        With an ``ambiguous`` verdict, simulate the proposed separating manoeuvre with each
+        candidate as the truth and check that it separates them (:mod:`.separation`).
     seed : int
         Seed of the Monte Carlo null distributions.
     correlation_correction : {"auto", "on", "off"}
@@ -77,13 +91,16 @@ class DiscrepancyConfig(_Params):
     yaw_rate_floor: float = 1e-3  # [rad/s]
     ay_floor: float = 0.02  # [m/s^2]
     use_imu: bool = True
-    steering: str = "curvature"
+    steering: str = "auto"
+    input_noise: bool = True
+    ambiguity_bic: float = 10.0
+    verify_separation: bool = True
     seed: int = 0
     correlation_correction: str = "auto"
 
     _positive: ClassVar[tuple[str, ...]] = (
         "window", "step", "alpha", "whiteness_alpha", "whiteness_lags", "mc_draws", "min_speed",
-        "e1_floor", "e2_floor", "yaw_rate_floor", "ay_floor",
+        "e1_floor", "e2_floor", "yaw_rate_floor", "ay_floor", "ambiguity_bic",
     )  # fmt: skip
     _non_negative: ClassVar[tuple[str, ...]] = ("preroll", "gn_iterations", "max_effects", "speed_variation")
 
@@ -95,9 +112,9 @@ class DiscrepancyConfig(_Params):
         for name in ("gn_iterations", "max_effects", "mc_draws", "seed"):
             if not isinstance(getattr(self, name), int) or isinstance(getattr(self, name), bool):
                 raise ParameterError(f"DiscrepancyConfig.{name} must be an integer, got {getattr(self, name)!r}")
-        if self.steering not in ("curvature", "linear", "hold"):
+        if self.steering not in ("auto", "curvature", "linear", "hold"):
             raise ParameterError(
-                f"DiscrepancyConfig.steering must be 'curvature', 'linear' or 'hold', got {self.steering!r}"
+                f"DiscrepancyConfig.steering must be 'auto', 'curvature', 'linear' or 'hold', got {self.steering!r}"
             )
         if self.correlation_correction not in ("auto", "on", "off"):
             raise ParameterError(

@@ -305,7 +305,7 @@ def prepare(log: DrivingLog, config: DiscrepancyConfig | None = None) -> ModelDa
         kappa[bad_k] = np.interp(t[bad_k], t[~bad_k], kappa[~bad_k]) if (~bad_k).any() else 0.0
         notes.append(f"kappa missing on {int(bad_k.sum())} rows: interpolated")
     pdd = vx * kappa
-    dslope = steering_slope(t, delta, kappa, vx, config.steering)
+    dslope = steering_slope(t, delta, kappa, vx, "curvature" if config.steering == "auto" else config.steering)
     e1 = np.asarray(s["e1"], dtype=float)
     e2 = np.asarray(s["e2"], dtype=float)
     frames = np.isfinite(e1) & np.isfinite(e2)
@@ -385,7 +385,7 @@ def prepare_imu(log: DrivingLog, config: DiscrepancyConfig | None = None) -> Mod
     delta = np.asarray(s["delta"], dtype=float)
     vx = np.asarray(s["vx"], dtype=float)
     mode = config.steering
-    if mode == "curvature":
+    if mode in ("curvature", "auto"):
         mode = "linear"
         notes.append("steering between rows: linear (an IMU-only log has no path curvature)")
     dslope = steering_slope(t, delta, np.zeros_like(t), vx, mode)

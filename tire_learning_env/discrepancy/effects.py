@@ -102,6 +102,10 @@ from ._model import (
     TH_SPEED_COEF,
     TH_STEER_OFFSET,
     TH_WIND,
+    TH_SUPER_RATE,
+    TH_SUPER_CAP,
+    TH_E2_DRIFT,
+    TH_STEER_RATIO,
 )
 
 __all__ = [
@@ -220,6 +224,20 @@ LIBRARY: tuple[CandidateEffect, ...] = (
     _one("speed_dependent_stiffness", "tire forces that change with speed: both axle forces times "
          "1 - coefficient vx^2 (e.g. aerodynamic lift unloading the tires)", "coefficient", "s^2/m^2",
          TH_SPEED_COEF, (-1e-3, 1e-3), 5e-5, (0.0,), speed=True),
+    CandidateEffect(
+        "road_superelevation",
+        "superelevation of the curves (road design): the outer edge is raised by min(rate |kappa|, cap) with kappa "
+        "the path curvature, so gravity pulls the car towards the inside of the curve with m g sin(bank); the "
+        "accelerometer does not feel it (adds to a constant crossfall, road_bank)",
+        ("rate", "cap"), ("rad m", "rad"), (TH_SUPER_RATE, TH_SUPER_CAP), ((0.0, 60.0), (0.005, 0.15)), (5.0, 0.02),
+        (0.0, 0.1), ((10.0, 0.1), (20.0, 0.05), (5.0, 0.035)),
+    ),
+    _one("camera_heading_drift", "camera heading bias that drifts slowly: measured e2 = true e2 + drift_rate "
+         "(t - t_mid), t_mid the middle of the log, on top of any constant camera_heading_bias (e.g. a camera mount "
+         "warming up)", "drift_rate", "rad/s", TH_E2_DRIFT, (-1e-3, 1e-3), 2e-5, (0.0,)),
+    _one("steering_ratio_error", "steering-ratio error: the road wheels turn (1 + ratio_error) times the logged "
+         "delta (a wrong steering-ratio calibration, or compliance proportional to the angle)", "ratio_error", "-",
+         TH_STEER_RATIO, (-0.3, 0.3), 0.02, (0.0,)),
 )
 
 EFFECT_NAMES: tuple[str, ...] = tuple(e.name for e in LIBRARY)

@@ -64,8 +64,29 @@ def render_markdown(result: DiscrepancyResult, doc: dict) -> str:
         "none": "the nominal model explains the data within the measurement noise.",
         "unexplained": "a structured residual remains that no candidate effect in the library explains. "
         "No effect is named.",
+        "ambiguous": "several candidate effects explain the log about equally well; this log cannot tell them apart. "
+        "No single one is named; the manoeuvre below would separate them.",
     }[result.verdict]
     lines += [f"**Verdict: `{result.verdict}`**: {verdict_text}", ""]
+    if result.verdict == "ambiguous":
+        lines += ["## Candidates that fit equally well", "",
+                  "| candidate | parameters | chi2 | LR | p-value | BIC above the best |", "|---|---|---|---|---|---|"]
+        for c in result.candidates:
+            params = ", ".join(f"{k} = {_fmt(v)} {c['units'].get(k, '')}" for k, v in c["parameters"].items())
+            lines.append(f"| `{c['name']}` | {params} | {_fmt(c['chi2'])} | {_fmt(c['likelihood_ratio'])} | "
+                         f"{_fmt(c['p_value'], 2)} | {_fmt(c['delta_bic_to_best'], 3)} |")
+        sm = result.separating_manoeuvre or {}
+        lines += ["", f"**Separating manoeuvre** ({', '.join(sm.get('effects', []))}): {sm.get('manoeuvre', '-')}.", ""]
+        check = sm.get("check_by_simulation")
+        if check:
+            if check.get("verified") is None:
+                lines.append(f"Not checked by simulation: {check.get('reason')}.")
+            else:
+                lines.append("Checked by simulating the manoeuvre with each candidate as the truth: "
+                             + ("it separates them" if check["verified"] else "it did NOT separate them") + " ("
+                             + "; ".join(f"truth `{r['truth']}`: {r['verdict']} {r['named']}, BIC advantage "
+                                         f"{_fmt(r['bic_advantage_of_truth'], 3)}" for r in check["runs"]) + ").")
+            lines.append("")
     tire = doc["nominal_model"]["tire"]
     lines += [
         f"Nominal model: bicycle model + {tire['kind']} tire; vehicle m = {result.vehicle.m:g} kg, "

@@ -108,6 +108,8 @@ class ResidualModel:
         self.tf, self.tabf = _tire_arrays(front_tire)
         self.tr, self.tabr = _tire_arrays(rear_tire)
         self.n_evaluations = 0
+        #: errors-in-variables model of the steering between rows (:mod:`.noise`); None = white noise only
+        self.input_noise = None
         self.kind = data.kind
         self.n_state = 2 if data.kind == "imu" else 4
         if self.kind == "imu" and data.ay_guess is not None:
@@ -156,7 +158,9 @@ class ResidualModel:
         ns = self.n_state
         resid = np.empty(m)
         x0 = np.empty((d.n_windows, ns))
-        if converge:
+        whiten = self.input_noise is not None and self.input_noise.active
+        if converge or (whiten and jac is not None):
+            # a whitened sensitivity cannot drive the unwhitened fixed-Jacobian iteration: converge instead
             mode, n_iter, jac = 2, (12 if self.kind == "imu" else 8), np.empty((m, ns))
         elif jac is not None:
             mode, n_iter, jac = 1, int(self.config.gn_iterations), np.array(jac, dtype=float)
@@ -176,6 +180,8 @@ class ResidualModel:
                 float(self.config.step), _FD, _MAX_STEP, _TOL, n_iter, resid, x0, jac, mode,
             )  # fmt: skip
         self.n_evaluations += 1
+        if whiten:
+            resid, jac, x0 = self.input_noise.whiten(d, resid, jac, x0)
         return Evaluation(th, resid, x0, jac)
 
     def converged(self, theta: NDArray | None = None, x0_guess: NDArray | None = None) -> Evaluation:

@@ -28,7 +28,7 @@ from typing import Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._kernels import X_SCALE_F, X_SCALE_R
+from .._kernels import X_BANK, X_SCALE_F, X_SCALE_R, X_WIND_F
 from ..dynamics import BicyclePlant, PlantEffects
 from ..params import ParameterError
 from ..roads import LaneChangeRoad, PiecewiseCurvatureRoad, Road
@@ -36,6 +36,7 @@ from ..roads import LaneChangeRoad, PiecewiseCurvatureRoad, Road
 __all__ = [
     "simulate_hidden",
     "IdentificationRoad",
+    "CurvesRoad",
     "DISCREPANCY_ROADS",
     "HIDDEN_EFFECTS",
     "HiddenEffects",
@@ -65,6 +66,20 @@ HIDDEN_EFFECTS: dict[str, tuple[str, tuple[str, ...], str, str]] = {
     "steering_nonlinearity": (
         "wrapper", ("steering_cubic",), "1/rad^2", "road-wheel angle delta + k delta^3 (NOT in the candidate library)",
     ),  # fmt: skip
+    # issue 18: effects as roads and sensors have them
+    "crossfall": ("plant", ("bank_angle",), "rad", "constant crossfall of the road (= road_bank)"),
+    "superelevation_rate": (
+        "wrapper", ("superelevation_rate",), "rad m", "curve superelevation per unit path curvature (outer edge up)",
+    ),  # fmt: skip
+    "superelevation_cap": ("wrapper", ("superelevation_cap",), "rad", "largest curve superelevation (default 0.07)"),
+    "steering_ratio_error": ("wrapper", ("steering_ratio",), "-", "road-wheel angle (1 + error) * delta"),
+    "camera_heading_drift": (
+        "sensor", ("e2_drift",), "rad/s", "camera heading bias drifting at this rate (zero at the log's middle)",
+    ),  # fmt: skip
+    "crosswind_gust": (
+        "wrapper", ("gust_amplitude",), "N", "1-cos crosswind gusts of this peak force, 2 s long, one every 7 s, "
+        "alternating side (NOT in the candidate library: not a constant effect)",
+    ),  # fmt: skip
 }
 _CAMERA_FIELDS = {"camera_latency": "latency", "camera_heading_bias": "e2_bias", "camera_offset_bias": "e1_bias"}
 _PLANT_FIELDS = tuple(f.name for f in fields(PlantEffects))
@@ -89,17 +104,35 @@ class HiddenEffects:
     camera: dict = field(default_factory=dict)
     speed_coefficient: float = 0.0
     steering_cubic: float = 0.0
+    superelevation_rate: float = 0.0
+    superelevation_cap: float = 0.07
+    steering_ratio: float = 0.0
+    gust_amplitude: float = 0.0
+    e2_drift: float = 0.0
 
     @property
     def needs_wrapper(self) -> bool:
-        return self.speed_coefficient != 0.0 or self.steering_cubic != 0.0
+        return any(v != 0.0 for v in (self.speed_coefficient, self.steering_cubic, self.superelevation_rate,
+                                      self.steering_ratio, self.gust_amplitude))  # fmt: skip
 
     def make_plant(self, vehicle, front_tire, rear_tire):
         """The truth plant: a :class:`BicyclePlant`, wrapped in :class:`EffectPlant` if needed."""
         plant = BicyclePlant(vehicle, front_tire, rear_tire, self.plant)
         if self.needs_wrapper:
-            return EffectPlant(plant, self.speed_coefficient, self.steering_cubic)
+            return EffectPlant(
+                plant, self.speed_coefficient, self.steering_cubic, superelevation_rate=self.superelevation_rate,
+                superelevation_cap=self.superelevation_cap, steering_ratio=self.steering_ratio,
+                gust_amplitude=self.gust_amplitude,
+            )  # fmt: skip
         return plant
+
+    def apply_to_sensors(self, cols: dict) -> dict:
+        """Sensor effects applied to the log's columns (the camera heading drift, zero at the log's middle)."""
+        if self.e2_drift != 0.0:
+            t = cols["t"]
+            cols = dict(cols)
+            cols["e2"] = cols["e2"] + self.e2_drift * (t - 0.5 * (t[0] + t[-1]))
+        return cols
 
 
 def parse_hidden_effects(assignments: dict[str, float]) -> HiddenEffects:
@@ -113,12 +146,13 @@ def parse_hidden_effects(assignments: dict[str, float]) -> HiddenEffects:
     plant: dict[str, float] = {}
     camera: dict[str, float] = {}
     wrapper: dict[str, float] = {}
+    sensor: dict[str, float] = {}
     for name, value in assignments.items():
         if not math.isfinite(value):
             raise ParameterError(f"--effect {name}: value must be finite, got {value!r}")
         if name in HIDDEN_EFFECTS:
             target, names, _, _ = HIDDEN_EFFECTS[name]
-            dest = {"plant": plant, "camera": camera, "wrapper": wrapper}[target]
+            dest = {"plant": plant, "camera": camera, "wrapper": wrapper, "sensor": sensor}[target]
             for f in names:
                 dest[f] = value
         elif name in _CAMERA_FIELDS.values() or name in ("e1_bias", "e2_bias"):
@@ -133,6 +167,11 @@ def parse_hidden_effects(assignments: dict[str, float]) -> HiddenEffects:
         camera=camera,
         speed_coefficient=wrapper.get("speed_coefficient", 0.0),
         steering_cubic=wrapper.get("steering_cubic", 0.0),
+        superelevation_rate=wrapper.get("superelevation_rate", 0.0),
+        superelevation_cap=wrapper.get("superelevation_cap", 0.07),
+        steering_ratio=wrapper.get("steering_ratio", 0.0),
+        gust_amplitude=wrapper.get("gust_amplitude", 0.0),
+        e2_drift=sensor.get("e2_drift", 0.0),
     )
 
 
@@ -147,12 +186,41 @@ class EffectPlant:
     runs it in its Python loop (same tick sequence).
     """
 
-    def __init__(self, plant: BicyclePlant, speed_coefficient: float = 0.0, steering_cubic: float = 0.0) -> None:
+    def __init__(
+        self, plant: BicyclePlant, speed_coefficient: float = 0.0, steering_cubic: float = 0.0, *,
+        superelevation_rate: float = 0.0, superelevation_cap: float = 0.07, steering_ratio: float = 0.0,
+        gust_amplitude: float = 0.0,
+    ) -> None:  # fmt: skip
         self.inner = plant
         self.vehicle = plant.vehicle
         self.speed_coefficient = float(speed_coefficient)
         self.steering_cubic = float(steering_cubic)
+        self.superelevation_rate = float(superelevation_rate)  # [rad m]
+        self.superelevation_cap = float(superelevation_cap)  # [rad]
+        if not self.superelevation_cap > 0:
+            raise ParameterError(f"superelevation_cap must be > 0 rad, got {superelevation_cap!r}")
+        self.steering_ratio = float(steering_ratio)  # [-]
+        self.gust_amplitude = float(gust_amplitude)  # [N]
         self._base = (plant.eff_vec[X_SCALE_F], plant.eff_vec[X_SCALE_R])
+        self._crossfall = float(plant.eff_vec[X_BANK])
+        self._wind = float(plant.eff_vec[X_WIND_F])
+        self._time = 0.0
+
+    def bank(self, kappa: float) -> float:
+        """Road bank [rad] at path curvature ``kappa`` [1/m]: crossfall minus the superelevation
+        ``sign(kappa) min(rate |kappa|, cap)`` (the outer edge of a curve is raised)."""
+        e = min(abs(self.superelevation_rate * kappa), self.superelevation_cap)
+        return self._crossfall - math.copysign(e, self.superelevation_rate * kappa)
+
+    def gust(self, t: float) -> float:
+        """Gust force [N] at time ``t`` [s]: a 1-cos gust of 2 s every 7 s, alternating side."""
+        period, length = 7.0, 2.0
+        k = int(t // period)
+        phase = t - k * period
+        if phase >= length:
+            return 0.0
+        sign = 1.0 if k % 2 == 0 else -1.0
+        return sign * self.gust_amplitude * 0.5 * (1.0 - math.cos(2.0 * math.pi * phase / length))
 
     @property
     def state(self) -> NDArray:
@@ -160,6 +228,7 @@ class EffectPlant:
 
     def reset(self, xi: ArrayLike | None = None) -> None:
         self.inner.reset(xi)
+        self._time = 0.0
 
     def _gain(self, vx: float) -> float:
         g = 1.0 - self.speed_coefficient * vx * vx
@@ -173,7 +242,14 @@ class EffectPlant:
             g = self._gain(vx + 0.5 * dt * ax)
             self.inner.eff_vec[X_SCALE_F] = self._base[0] * g
             self.inner.eff_vec[X_SCALE_R] = self._base[1] * g
-        actual = delta + self.steering_cubic * delta**3
+        if self.superelevation_rate != 0.0:
+            v_mid = vx + 0.5 * dt * ax
+            # path curvature at the middle of the step (psi_dot_des = (start, middle, end) of the step) [1/m]
+            self.inner.eff_vec[X_BANK] = self.bank(psi_dot_des[1] / max(v_mid, 0.1))
+        if self.gust_amplitude != 0.0:
+            self.inner.eff_vec[X_WIND_F] = self._wind + self.gust(self._time + 0.5 * dt)
+        self._time += dt
+        actual = delta * (1.0 + self.steering_ratio) + self.steering_cubic * delta**3
         return self.inner.step(actual, dt, psi_dot_des, psi_ddot_des, vx, ax)
 
     def true_axle_curve(self, alpha: ArrayLike, axle: str, vx: float | None = None) -> NDArray:
@@ -267,8 +343,40 @@ class IdentificationRoad(Road):
         return self._curves.curvature_rate(x) + self._changes.curvature_rate(x)
 
 
+class CurvesRoad(Road):
+    """A winding road of steady curves both ways and nothing else (no lane changes), every 2400 m.
+
+    Curves of R = 300, 400, 250 and 350 m (left, right, left, right; 250-300 m long) between
+    straights of 100-150 m, curvature changes blended by 60 m clothoids. At a constant speed
+    the car spends most of the time in steady cornering: where a curvature-proportional
+    superelevation and a cornering-stiffness error look alike.
+
+    Parameters
+    ----------
+    lane_width : float
+        Lane width [m].
+    """
+
+    period = 2400.0  # [m]
+
+    def __init__(self, lane_width: float = 3.7) -> None:
+        self.lane_width = lane_width
+        self._curves = PiecewiseCurvatureRoad.from_segments(
+            [(150.0, math.inf), (300.0, 300.0), (100.0, math.inf), (250.0, -400.0), (150.0, math.inf),
+             (300.0, 250.0), (100.0, math.inf), (250.0, -350.0), (800.0, math.inf)],
+            transition_length=60.0,
+            lane_width=lane_width,
+        )  # fmt: skip
+
+    def curvature(self, s: ArrayLike) -> NDArray:
+        return self._curves.curvature(np.mod(np.asarray(s, dtype=float), self.period))
+
+    def curvature_rate(self, s: ArrayLike) -> NDArray:
+        return self._curves.curvature_rate(np.mod(np.asarray(s, dtype=float), self.period))
+
+
 #: roads added by the discrepancy workflow to ``simulate --road`` (name -> factory)
-DISCREPANCY_ROADS: dict[str, Callable[[], Road]] = {"identification": IdentificationRoad}
+DISCREPANCY_ROADS: dict[str, Callable[[], Road]] = {"identification": IdentificationRoad, "curves": CurvesRoad}
 
 
 def simulate_hidden(
@@ -284,6 +392,7 @@ def simulate_hidden(
     log_rate: float = 100.0,
     vehicle=None,
     truth_columns: bool = True,
+    tire: str = "pacejka",
 ) -> dict[str, NDArray]:
     """Columns of a shared-format log from the low-order truth with hidden ``effects``.
 
@@ -309,6 +418,11 @@ def simulate_hidden(
         Speed profile name (:data:`SPEED_PROFILES`).
     log_rate : float
         Row rate [Hz].
+    vehicle : VehicleParams, optional
+    truth_columns : bool
+        Include the ``true_*`` columns.
+    tire : {"pacejka", "linear"}
+        Truth tire model.
     """
     from ..params import CameraParams, TireParams, VehicleParams
     from ..simulation import simulate
@@ -322,11 +436,11 @@ def simulate_hidden(
         camera = CameraParams(rate=camera_rate, noise=noise, e1_noise=e1_noise, e2_noise=e2_noise, **hidden.camera)
     if isinstance(road, str) and road in DISCREPANCY_ROADS:
         road = DISCREPANCY_ROADS[road]()
-    plant = hidden.make_plant(vehicle, *axle_tires(vehicle, "pacejka", TireParams()))
+    plant = hidden.make_plant(vehicle, *axle_tires(vehicle, tire, TireParams()))
     physics_rate = 1000.0
     log = simulate(road, duration, vehicle=vehicle, camera=camera, physics_rate=physics_rate, seed=seed,
                    speed_profile=speed_profile(speed, vehicle.vx), plant=plant)  # fmt: skip
-    cols = log.to_columns(include_truth=truth_columns)
+    cols = hidden.apply_to_sensors(log.to_columns(include_truth=truth_columns))
     step = max(int(round(physics_rate / log_rate)), 1)
     keep = np.zeros(len(cols["t"]), dtype=bool)
     keep[::step] = True

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,19 +45,30 @@ from .diagnostics import (
 from .effects import IMU_CONFOUNDED, CandidateEffect, library_for
 from .residuals import Evaluation, ResidualModel
 from .selection import SelectionResult, acceptance_threshold, forward_selection
+from .separation import propose, verify_separation
 
 __all__ = ["TIRE_CHOICES", "VERDICT_RULES", "DiscrepancyResult", "analyze", "nominal_tires"]
 
 #: the verdict rules in plain words (also written to report.json)
 VERDICT_RULES = (
     "found: at least one candidate effect passed the selection criterion and the residual of the model with the "
-    "accepted effects is white (camera portmanteau test, p >= whiteness_alpha). none: no candidate passed and the "
+    "accepted effects is white (camera portmanteau test, p >= whiteness_alpha). ambiguous: as found, but another "
+    "candidate that also passed the criterion fits the log about equally well (BIC within ambiguity_bic of the "
+    "accepted one): the candidates are listed with their parameters and evidence, none is named, and the manoeuvre "
+    "that would separate them is proposed (and checked by simulating it). none: no candidate passed and the "
     "nominal residual is white: the nominal model explains the data within the noise. unexplained: a structured "
     "residual remains that the accepted effects, if any, do not remove; effects accepted on the way are then listed "
     "as partial_effects, never as the answer."
 )
 
 TIRE_CHOICES = ("pacejka", "linear", "learned")
+
+#: rows at most this far apart [s] (40 Hz and more) resolve the road-wheel angle of a car (the steering system's
+#: bandwidth is a few Hz): ``steering="auto"`` uses ``curvature`` (a sampled controller logged at its rate) and no
+#: steering error between rows is estimated. Sparser rows take the better of ``curvature`` and ``linear`` on the
+#: nominal residual, and the steering error between rows is estimated from the log when the residual is
+#: structured (:mod:`.noise`)
+SPARSE_ROWS_DT = 0.025
 
 #: effect pairs that e1/e2 alone cannot tell apart (the IMU can)
 _EQUIVALENT_WITHOUT_IMU = {frozenset({"road_bank", "crosswind"})}
@@ -159,6 +170,10 @@ class DiscrepancyResult:
     notes: list[str] = field(default_factory=list)
     turn_braking_before: dict | None = None
     turn_braking_after: dict | None = None
+    steering_mode: str = "curvature"
+    input_noise: Any = None
+    candidates: list[dict] = field(default_factory=list)
+    separating_manoeuvre: dict | None = None
 
     @property
     def gap_ratio(self) -> float:
@@ -218,6 +233,8 @@ class DiscrepancyResult:
         return {
             "verdict": self.verdict,
             "effects": self.effects,
+            **({"candidates": self.candidates, "separating_manoeuvre": self.separating_manoeuvre}
+               if self.verdict == "ambiguous" else {}),
             "gap_before": self.gap_before.to_dict(),
             "gap_after": self.gap_after.to_dict(),
             "gap_ratio": self.gap_ratio,
@@ -236,7 +253,8 @@ class DiscrepancyResult:
                 "noise_sigma_estimated": {
                     c: float(d.sigma_estimated[i]) for i, c in enumerate(CHANNELS) if c in d.channels
                 },
-                "steering_between_rows": cfg.steering if d.kind == "camera" else _imu_steering(cfg),
+                "steering_between_rows": self.steering_mode if d.kind == "camera" else _imu_steering(cfg),
+                **({"input_noise": self.input_noise.to_dict()} if self.input_noise is not None else {}),
                 **({"model": "body-frame bicycle model (states vy, r)", "primary_channels": ["yaw_rate", "ay"],
                     "preroll_s": 0.0,
                     "ax_input": "slope of vx (0.1 s centred moving average) + slow part (1 s) of logged ax - slope"}
@@ -292,7 +310,7 @@ class DiscrepancyResult:
 
 
 def _imu_steering(cfg: DiscrepancyConfig) -> str:
-    return "linear" if cfg.steering == "curvature" else cfg.steering
+    return "linear" if cfg.steering in ("curvature", "auto") else cfg.steering
 
 
 def _identifiability_doc() -> list[dict]:
@@ -371,6 +389,7 @@ def analyze(
     config: DiscrepancyConfig | None = None,
     progress: bool | None = None,
     tire_params: TireParams | None = None,
+    candidates: Sequence[str] | None = None,
 ) -> DiscrepancyResult:
     """Run the whole workflow on a camera log.
 
@@ -387,6 +406,8 @@ def analyze(
         Show a tqdm progress bar (default: when attached to a terminal).
     tire_params : TireParams, optional
         Magic Formula shape of the nominal Pacejka tire.
+    candidates : sequence of str, optional
+        Names of the library effects to try (default: the whole library of the log's kind).
 
     Returns
     -------
@@ -408,6 +429,11 @@ def analyze(
         notes += [f"IMU log cleaning: {n}" for n in cleaning.notes()]
     data = prepare(log, config)
     library = library_for(data.kind)
+    if candidates is not None:
+        unknown = sorted(set(candidates) - {c.name for c in library})
+        if unknown:
+            raise ParameterError(f"unknown candidate effect(s) {unknown}; the library has {[c.name for c in library]}")
+        library = tuple(c for c in library if c.name in set(candidates))
     candidates = [c for c in library if not c.needs_speed_variation or data.speed_variation >= config.speed_variation]
     skipped = [c.name for c in library if c not in candidates]
     if skipped:
@@ -421,6 +447,7 @@ def analyze(
         bar.set_postfix_str("nominal tire")
         front, rear, tire_info = nominal_tires(log, vehicle, tire, tire_params)
         model = ResidualModel(data, vehicle, front, rear, config)
+        steering_mode, input_noise = _prepare_model(model, config, notes)
         bar.update(1)
 
         def tick(name: str) -> None:
@@ -447,6 +474,31 @@ def analyze(
         lag_span = config.whiteness_lags
         w_before = whiteness(data, sel.nominal, lag_span, config.mc_draws, rng)
         w_final = whiteness(data, sel.final, lag_span, config.mc_draws, rng) if sel.accepted else w_before
+        sparse = float(np.median(np.diff(data.t))) > SPARSE_ROWS_DT
+        if config.input_noise and sparse and data.kind == "camera" and w_final.p_value < config.whiteness_alpha:
+            # a structured residual: is it the steering the rows do not resolve? lambda from the nominal residual
+            # (conservative: with an effect present it takes part of the effect for input noise, which costs
+            # power, whereas lambda from a model with falsely accepted effects would be too small; see .noise)
+            from .noise import estimate_input_noise
+
+            input_noise = estimate_input_noise(model, sel.nominal)
+            if input_noise.active:
+                model.input_noise = input_noise
+                notes.append(
+                    f"the rows do not resolve the steering: a steering error between rows of lambda = "
+                    f"{input_noise.scale:.3g} times the logged steering's roughness ({input_noise.sigma_u:.3g} rad) "
+                    "is part of the noise (restricted likelihood on the nominal residual; the residual of the first "
+                    "selection was not white); the selection was repeated with residuals whitened accordingly"
+                )
+                bar.set_postfix_str("selection (input noise)")
+                # what the input-noise model leaves correlated in time is discounted as well (Newey-West)
+                correct = config.correlation_correction != "off"
+                sel = forward_selection(
+                    model, candidates, config.alpha, config.max_effects, progress=tick, correct_correlation=correct,
+                    signatures=imu, robust_states=imu,
+                )  # fmt: skip
+                w_before = whiteness(data, sel.nominal, lag_span, config.mc_draws, rng)
+                w_final = whiteness(data, sel.final, lag_span, config.mc_draws, rng) if sel.accepted else w_before
         bar.update(1)
         bar.set_postfix_str("locate")
         traj_before = model.trajectories(sel.nominal)
@@ -459,7 +511,27 @@ def analyze(
         for e, values, stderr in sel.accepted:
             ev = _evidence(sel, e, n, config)
             entries.append(_effect_entry(e, values, stderr, ev, data.channels, data.kind))
+        ambiguous: list[dict] = []
+        manoeuvre = None
         if sel.accepted and white_final:
+            ambiguous = _ambiguous_alternatives(sel, entries, n, config)
+        if ambiguous:
+            # the best-fitting candidate and the alternatives the log cannot tell apart from it
+            verdict, partial = "ambiguous", []
+            best = ambiguous[0]
+            effects = [e for e in entries if e["name"] != best["name"]]
+            gap_after, gap_partial, final = gap_final, None, sel.final
+            manoeuvre = propose(best["name"], ambiguous[1]["name"])
+            if config.verify_separation and data.kind == "camera":
+                bar.set_postfix_str("separating manoeuvre")
+                manoeuvre["check_by_simulation"] = verify_separation(
+                    _Partial(data, vehicle, tire_info, config), best, ambiguous[1], manoeuvre["recipe"]
+                )
+            notes.append(
+                f"{len(ambiguous)} candidates explain the log about equally well (BIC within {config.ambiguity_bic:g} "
+                f"of the best): {[c['name'] for c in ambiguous]}; no single one is named"
+            )
+        elif sel.accepted and white_final:
             verdict, effects, partial = "found", entries, []
             gap_after, gap_partial, final = gap_final, None, sel.final
         elif sel.accepted:
@@ -487,18 +559,18 @@ def analyze(
             gap_after=gap_after,
             gap_after_partial=gap_partial,
             whiteness_before=w_before,
-            whiteness_after=w_final if verdict == "found" else w_before if verdict == "none" else w_final,
+            whiteness_after=w_final if verdict in ("found", "ambiguous") else w_before if verdict == "none" else w_final,
             selection=sel,
             data=data,
             model=model,
             nominal=sel.nominal,
             final=final,
             trajectories_before=traj_before,
-            trajectories_after=traj_after if verdict == "found" else traj_before,
+            trajectories_after=traj_after if verdict in ("found", "ambiguous") else traj_before,
             windows_before=locate_windows(data, sel.nominal),
             windows_after=locate_windows(data, final),
             regimes_before=regimes(data, sel.nominal, traj_before),
-            regimes_after=regimes(data, final, traj_after if verdict == "found" else traj_before),
+            regimes_after=regimes(data, final, traj_after if verdict in ("found", "ambiguous") else traj_before),
             cross_correlation_before=cross_correlation(data, sel.nominal),
             cross_correlation_after=cross_correlation(data, final),
             tire=tire_info,
@@ -507,6 +579,10 @@ def analyze(
             source=log.source,
             runtime_s=0.0,
             notes=notes,
+            steering_mode=steering_mode,
+            input_noise=model.input_noise,
+            candidates=ambiguous,
+            separating_manoeuvre=manoeuvre,
         )
         if imu:
             result.turn_braking_before = turn_and_braking(data, sel.nominal)
@@ -516,6 +592,92 @@ def analyze(
         bar.close()
     result.runtime_s = time.perf_counter() - t_start
     return result
+
+
+@dataclass
+class _Partial:
+    """What :func:`.separation.verify_separation` needs of a result that is still being built."""
+
+    data: ModelData
+    vehicle: VehicleParams
+    tire: dict
+    config: DiscrepancyConfig
+
+
+def _ambiguous_alternatives(sel: SelectionResult, entries: list[dict], n: int, config: DiscrepancyConfig) -> list[dict]:
+    """The accepted effect with candidates that fit its round about equally well, best first (else empty).
+
+    An alternative qualifies when it was fitted in the round that accepted an effect, passed the
+    acceptance test itself, is not accepted in the end, and its BIC is within ``config.ambiguity_bic``
+    of the accepted effect's. Each entry: name, parameters, chi2, BIC difference to the best, evidence.
+    """
+    final = {e["name"] for e in entries}
+    for st in sel.steps:
+        if st.accepted is None or st.accepted not in final:
+            continue
+        best = st.tried[st.accepted]
+        level = config.alpha / len(st.tried)
+        bic_best = best["chi2"] + best["k"] * math.log(n)
+        group = []
+        for name, info in st.tried.items():
+            if name == st.accepted or name in final or not info.get("fitted"):
+                continue
+            bic = info["chi2"] + info["k"] * math.log(n)
+            if info["p_value"] < level and info["delta_bic"] < 0.0 and bic - bic_best < config.ambiguity_bic:
+                group.append((bic - bic_best, name, info))
+        if not group:
+            continue
+        entry = next(e for e in entries if e["name"] == st.accepted)
+        out = [{
+            "name": st.accepted, "parameters": entry["parameters"], "units": entry["units"],
+            "standard_errors": entry["standard_errors"], "delta_bic_to_best": 0.0, "chi2": best["chi2"],
+            "likelihood_ratio": best["lr"], "p_value": best["p_value"], "description": entry["description"],
+        }]  # fmt: skip
+        for dbic, name, info in sorted(group, key=lambda g: g[0]):
+            eff = next(c for c in library_for(_sel_kind(sel)) if c.name == name)
+            out.append({
+                "name": name, "parameters": info["parameters"], "units": eff.units_dict(),
+                "delta_bic_to_best": float(dbic), "chi2": info["chi2"], "likelihood_ratio": info["lr"],
+                "p_value": info["p_value"], "description": eff.description,
+            })  # fmt: skip
+        return out
+    return []
+
+
+def _sel_kind(sel: SelectionResult) -> str:
+    """Log kind of a selection (the IMU model state has 2 entries, the camera model 4)."""
+    return "imu" if sel.nominal.x0.shape[1] == 2 else "camera"
+
+
+def _prepare_model(model: ResidualModel, config: DiscrepancyConfig, notes: list[str]):
+    """Steering between rows (``auto``: the better of ``curvature`` and ``linear`` on the nominal residual)
+    and the errors-in-variables model of the steering the rows do not show (:mod:`.noise`)."""
+    from .data import steering_slope
+    from .noise import estimate_input_noise
+
+    data = model.data
+    if data.kind != "camera":
+        return _imu_steering(config), None
+    mode = config.steering
+    nominal = model.converged()
+    dt_row = float(np.median(np.diff(data.t)))
+    if mode == "auto" and dt_row <= SPARSE_ROWS_DT:
+        # rows this dense resolve a sampled controller; the two modes differ by half a row interval of
+        # steering delay, which a lag effect (latency, relaxation) would otherwise absorb
+        mode = "curvature"
+    elif mode == "auto":
+        curvature_slope = data.dslope
+        data.dslope = steering_slope(data.t, data.delta, data.kappa, data.vx, "linear")
+        linear = model.converged()
+        if linear.chi2 < nominal.chi2:
+            mode, nominal = "linear", linear
+        else:
+            mode, data.dslope = "curvature", curvature_slope
+        notes.append(
+            f"steering between rows: {mode} (rows every {1e3 * dt_row:.3g} ms: the smaller nominal residual of "
+            "curvature and linear)"
+        )
+    return mode, None
 
 
 def _evidence(sel: SelectionResult, effect: CandidateEffect, n: int, config: DiscrepancyConfig) -> dict:
