@@ -1,3 +1,6 @@
+"""LaneKeepingEnv (envs/lane_keeping.py): determinism, action checks, config, info, rendering, vector envs
+(both env checkers on every registered id: tests/test_registration.py)."""
+
 import gymnasium as gym
 import numpy as np
 import pytest
