@@ -87,6 +87,10 @@ class LaneKeepingDriver:
         self.guard[GUARD_GAIN_LOW] = gain_low
         self.guard[GUARD_GAIN_HIGH] = gain_high
 
+    def kernel_args(self) -> tuple:
+        """``(gains, integral state, a_y guard)`` for the compiled loop (updated in place there)."""
+        return self.param_vec, self.state, self.guard
+
     def steer(self, e1: float, e2: float, kappa: float, vx: float, dt: float) -> float:
         """Road-wheel angle [rad] from measured ``e1`` [m], ``e2`` [rad] and curvature [1/m].
 

@@ -73,7 +73,8 @@ class Camera:
         self.counters[CAMC_NOISE] = 0
 
     def kernel_args(self) -> tuple:
-        """``(cam, cstate, counters, pending, noise, drop)`` for the compiled loop."""
+        """``(cam, cstate, counters, pending, noise, drop)`` for the compiled loop (call after
+        :meth:`ensure_noise`: it may replace the noise arrays)."""
         return self.param_vec, self.state, self.counters, self.pending, self.noise, self.drop
 
     def tick(self, t: float, e1: float, e2: float) -> tuple[float, float] | None:

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from ._kernels import (
     CURVATURE_TABLE,
     GUARD_AY,
+    NO_LANE_CHANGE,
     LOG_INDEX,
     LOG_TRUE_E1,
     LOG_TRUE_E2_DOT,
@@ -244,11 +245,11 @@ class Simulator:
         full = math.nan if steering is None else float(steering)
         if self.speed_profile is None and hasattr(self.plant, "kernel_params"):
             self.table.cover(self.s + (n_ticks + 2) * self.dt * vx + 1.0)
+            road = (CURVATURE_TABLE, self.table.kappa, self.table.dkappa, self.table.ds, _NO_KNOTS)
             s, _, delta, done, status = advance_ticks(
-                n_ticks, self.dt, self.tick_index, self.plant.state, self.s, vx, ax, *self.plant.kernel_params(),
-                CURVATURE_TABLE, self.table.kappa, self.table.dkappa, self.table.ds, _NO_KNOTS, math.inf, 0.0,
-                *self.camera.kernel_args(), self.driver.param_vec, self.driver.state, self.driver.guard,
-                offset, full, self.last_delta, 0.0, 0.0, 1.0, out,
+                n_ticks, self.dt, self.tick_index, self.plant.state, self.s, vx, ax, self.plant.kernel_params(), road,
+                math.inf, 0.0, self.camera.kernel_args(), self.driver.kernel_args(), offset, full, self.last_delta,
+                NO_LANE_CHANGE, out,
             )  # fmt: skip
             compiled = True
         else:
