@@ -16,7 +16,38 @@ generator ``default_rng([seed, family index, i])``, so ``--n`` only appends scen
   truth as in A, on weaving roads (sine or chirp curvature) the other families never drive. Reported
   separately.
 
-Every family: cameras at 10-100 Hz, gaussian or uniform noise of 0.5-2 cm and 0.05-1 deg (std for
+Issue 16 adds three families, run only when named in ``--families`` (the default run is the three
+camera families above; their sampling and seeds are unchanged):
+
+- **``imu_white``** and **``imu_vibration_bias``**: IMU-only drives (``imu.simulate_imu_drive``:
+  body-frame bicycle, Magic-Formula tires of random shape and friction 0.8-1.2, true stiffness
+  within +/-20 % of the vehicle file's), vehicles from a front-drive hatchback (that of
+  ``benchmarks/bench_imu.py``) over the sedan and the heavy SUV to the light race car, speed
+  oscillating inside a random band within 10-60 m/s, peak commanded a_y 0.3-0.6 mu g, rows at
+  50, 100, 200, 500 or 1000 Hz (the IMU's rate), 60 s. ``imu_white``: white a_y noise of std
+  0.2-5 m/s^2 (log-uniform), yaw-rate noise 0.001-0.005 rad/s, no offsets. ``imu_vibration_bias``:
+  band-limited a_y vibration (2nd-order band-pass, 10-20 to 30-60 Hz, cut below Nyquist) of std
+  0.2-5 m/s^2 over 0.05-0.2 m/s^2 of white noise, a_y offset within +/-0.5 m/s^2, yaw-rate offset
+  within +/-0.01 rad/s. Estimators on the same rows: the package's IMU path with its defaults,
+  ``imu.estimate_imu(sensors, nominal_vehicle)`` (what ``tire-learning estimate`` runs on an IMU
+  log; ``imu_observer`` = its reported estimate, the refined observer blended with the KF; the
+  observer's own passes are kept per scenario), and the linear KF it runs beside
+  (``baselines.LinearKalmanFilter`` with the noise measured on the log and the vehicle file's
+  stiffness; ``linear_kf``). Scored: sideslip RMSE [deg] against the truth over every row, the
+  stiffness error and band coverage (the KF's "stiffness" is the vehicle file's), curve NRMSE.
+- **``fused``**: a camera log as in family A (hatchback, sedan or race car; lane changes or curves;
+  30-40 s) whose IMU columns (the simulator's exact ``ay``, ``yaw_rate``) are sampled at 100-1000 Hz
+  (NaN between samples) with white noise (0.05-0.5 m/s^2, 0.0005-0.003 rad/s) and constant
+  offsets (+/-0.2 m/s^2, +/-0.003 rad/s). ``observer.estimate`` runs with ``sensors`` camera,
+  imu and both (defaults otherwise) on the same log.
+
+Their targets (issue 16) are in ``target_check`` and below the markdown table: on every IMU
+family the reported IMU estimate's sideslip RMSE is at most the linear KF's on every scenario
+and its median is smaller; on the fused family the median |stiffness error| of ``both`` is below
+the smaller of the camera's and the IMU's. Written to ``benchmarks/results/generalization_imu.json``
+when only these families run (``--quick``: ``generalization_imu_quick.json``).
+
+Every camera family (A, B, C and the camera of ``fused``): cameras at 10-100 Hz, gaussian or uniform noise of 0.5-2 cm and 0.05-1 deg (std for
 gaussian, half-width for uniform), latency 0-100 ms, 0-20 % dropped frames; the log rows at 1 kHz
 (the simulator's physics rate) with NaN between camera frames.
 
@@ -47,7 +78,8 @@ Output: JSON on stdout, written atomically to ``benchmarks/results/generalizatio
 (``--quick``: ``generalization_quick.json``; ``--out`` to override). Partial results are written
 after every scenario.
 
-Run: ``python benchmarks/bench_generalization.py [--n 5] [--workers 2] [--quick] [--long]``
+Run: ``python benchmarks/bench_generalization.py [--n 5] [--workers 2] [--quick] [--long]``;
+issue 16's families: ``python benchmarks/bench_generalization.py --families imu_white,imu_vibration_bias,fused``
 """
 
 from __future__ import annotations
@@ -70,13 +102,24 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMB
 import numpy as np  # noqa: E402
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
-FAMILIES = ("low_order_pacejka", "multi_body", "held_out")
+FAMILIES = ("low_order_pacejka", "multi_body", "held_out")  # the camera families (the default run)
+IMU_FAMILIES = ("imu_white", "imu_vibration_bias")  # issue 16: IMU-only logs
+FUSED = "fused"  # issue 16: camera + IMU on the same log
+EXTRA_FAMILIES = IMU_FAMILIES + (FUSED,)
+ALL_FAMILIES = FAMILIES + EXTRA_FAMILIES  # the seed key uses the index here (the camera families keep theirs)
+#: estimators scored per family (the keys of a record and of a family block)
+ESTIMATORS = {**{f: ("observer", "ukf") for f in FAMILIES}, **{f: ("imu_observer", "linear_kf") for f in IMU_FAMILIES},
+              FUSED: ("camera", "imu", "both")}  # fmt: skip
 HELD_OUT = "held_out"
 AXLES = ("front", "rear")
 
 # Plausible frozen parameter sets (not in the package): a light race car and a heavy SUV.
 RACE_CAR = dict(m=760.0, Iz=1000.0, lf=1.30, lr=1.40, Cf=48000.0, Cr=52000.0, width=1.9, track=1.6, h_cg=0.30)
 HEAVY_SUV = dict(m=2300.0, Iz=5400.0, lf=1.45, lr=1.55, Cf=85000.0, Cr=90000.0, width=1.95, track=1.7, h_cg=0.75)
+# the front-drive hatchback of benchmarks/bench_imu.py (issue 16's second real car, plausible figures)
+HATCHBACK = dict(m=1250.0, Iz=1900.0, lf=1.05, lr=1.55, Cf=50000.0, Cr=45000.0)
+IMU_VEHICLES = ("hatchback", "sedan", "heavy_suv", "race_car")
+IMU_RATES = (50.0, 100.0, 200.0, 500.0, 1000.0)
 
 MAX_REDRAWS = 3
 CAMERA_RATES = (10.0, 15.0, 20.0, 25.0, 30.0, 50.0, 100.0)
@@ -138,10 +181,14 @@ def _pacejka_truth(rng: np.random.Generator) -> dict:
 
 def sample_scenario(family: str, i: int, seed: int, quick: bool, attempt: int = 0) -> dict:
     """Scenario ``i`` of ``family``; ``attempt > 0`` redraws it (used when the truth vehicle lost control)."""
-    key = [seed, FAMILIES.index(family), i] + ([attempt] if attempt else [])
+    key = [seed, ALL_FAMILIES.index(family), i] + ([attempt] if attempt else [])
     rng = np.random.default_rng(key)
     sc: dict = {"family": family, "index": i, "base_seed": seed, "quick": quick, "attempt": attempt,
                 "sim_seed": int(rng.integers(0, 2**31 - 1))}  # fmt: skip
+    if family in IMU_FAMILIES:
+        return _sample_imu(sc, rng, quick)
+    if family == FUSED:
+        return _sample_fused(sc, rng, quick)
     if family == "low_order_pacejka":
         sc["vehicle"] = str(rng.choice(["sedan", "commonroad_1", "commonroad_2", "race_car"]))
         sc["truth"] = {"plant": "low_order_pacejka", **_pacejka_truth(rng)}
@@ -167,6 +214,53 @@ def sample_scenario(family: str, i: int, seed: int, quick: bool, attempt: int = 
     return sc
 
 
+def _log_uniform(rng: np.random.Generator, lo: float, hi: float) -> float:
+    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+
+
+def _sample_imu(sc: dict, rng: np.random.Generator, quick: bool) -> dict:
+    """An IMU-only drive (``imu.simulate_imu_drive``): vehicle, Pacejka truth, speeds, rate, IMU errors."""
+    sc["vehicle"] = str(rng.choice(IMU_VEHICLES))
+    sc["truth"] = {"plant": "imu_pacejka", "stiffness_factor": [float(rng.uniform(0.8, 1.2)), float(rng.uniform(0.8, 1.2))],
+                   "mu": float(rng.uniform(0.8, 1.2)), "shape": float(rng.uniform(1.15, 1.65)),
+                   "curvature": float(rng.uniform(-1.5, 0.3))}  # fmt: skip
+    lo = float(rng.uniform(10.0, 45.0))
+    sc["speed"] = {"range": [lo, float(min(60.0, lo + rng.uniform(8.0, 25.0)))], "period_s": float(rng.uniform(30.0, 60.0))}
+    sc["ay_max_mu_g"] = float(rng.uniform(0.3, 0.6))  # peak commanded a_y as a fraction of mu g
+    sc["rate_hz"] = float(rng.choice(IMU_RATES))
+    imu: dict = {"yaw_rate_std": float(rng.uniform(0.001, 0.005))}
+    if sc["family"] == "imu_white":
+        imu.update(ay_white_std=_log_uniform(rng, 0.2, 5.0), vibration=None, ay_offset=0.0, yaw_rate_offset=0.0)
+    else:
+        imu.update(ay_white_std=float(rng.uniform(0.05, 0.2)),
+                   vibration={"std": _log_uniform(rng, 0.2, 5.0), "f_low": float(rng.uniform(10.0, 20.0)),
+                              "f_high": float(rng.uniform(30.0, 60.0))},
+                   ay_offset=float(rng.uniform(-0.5, 0.5)), yaw_rate_offset=float(rng.uniform(-0.01, 0.01)))  # fmt: skip
+    sc["imu"] = imu
+    sc["duration_s"] = 60.0
+    if quick:
+        sc["duration_s"] = 15.0
+        sc["rate_hz"] = min(sc["rate_hz"], 200.0)
+    return sc
+
+
+def _sample_fused(sc: dict, rng: np.random.Generator, quick: bool) -> dict:
+    """A camera log (as family A, low-order Pacejka truth) whose IMU columns carry noise, offsets and a rate."""
+    sc["vehicle"] = str(rng.choice(["hatchback", "sedan", "race_car"]))
+    sc["truth"] = {"plant": "low_order_pacejka", **_pacejka_truth(rng)}
+    sc["road"] = _lane_change_road(rng) if rng.random() < 0.5 else _curves_road(rng)
+    sc["duration_s"] = float(rng.uniform(30.0, 40.0))
+    sc["speed"] = _speed(rng)
+    sc["camera"] = _camera(rng)
+    sc["imu"] = {"rate_hz": float(rng.choice([100.0, 200.0, 500.0, 1000.0])), "ay_std": float(rng.uniform(0.05, 0.5)),
+                 "yaw_rate_std": float(rng.uniform(0.0005, 0.003)), "ay_offset": float(rng.uniform(-0.2, 0.2)),
+                 "yaw_rate_offset": float(rng.uniform(-0.003, 0.003))}  # fmt: skip
+    if quick:
+        sc["duration_s"] = 12.0
+        sc["camera"]["rate"] = min(sc["camera"]["rate"], 25.0)
+    return sc
+
+
 # --------------------------------------------------------------------------------------------
 # building and running one scenario
 # --------------------------------------------------------------------------------------------
@@ -179,6 +273,8 @@ def _vehicle(name: str, vx: float):
         return VehicleParams(vx=vx, **RACE_CAR)
     if name == "heavy_suv":
         return VehicleParams(vx=vx, **HEAVY_SUV)
+    if name == "hatchback":
+        return VehicleParams(vx=vx, **HATCHBACK)
     if name.startswith("commonroad_"):
         from tire_learning_env.high_order import MultiBodyParams, equivalent_bicycle
 
@@ -395,6 +491,208 @@ def run_scenario(sc: dict) -> dict:
 
 
 # --------------------------------------------------------------------------------------------
+# IMU and fused families (issue 16)
+# --------------------------------------------------------------------------------------------
+def build_imu(sc: dict):
+    """``(sensors, truth, tires, nominal_vehicle, truth_vehicle)`` of an IMU scenario."""
+    from tire_learning_env.imu import simulate_imu_drive
+    from tire_learning_env.params import TireParams
+
+    lo, hi = sc["speed"]["range"]
+    nominal = _vehicle(sc["vehicle"], 0.5 * (lo + hi))
+    tr = sc["truth"]
+    truth_vehicle = nominal.replace(Cf=nominal.Cf * tr["stiffness_factor"][0], Cr=nominal.Cr * tr["stiffness_factor"][1])
+    tire = TireParams(mu=tr["mu"], shape=tr["shape"], curvature=tr["curvature"])
+    dt = 1.0 / sc["rate_hz"]
+    imu = sc["imu"]
+    vib = imu["vibration"]
+    sensors, truth, tires = simulate_imu_drive(
+        nominal, duration=sc["duration_s"], dt=dt, tire=tire, true_vehicle=truth_vehicle, speed_range=(lo, hi),
+        speed_period=sc["speed"]["period_s"], ay_max=sc["ay_max_mu_g"] * tr["mu"] * 9.81,
+        noise_std=(imu["ay_white_std"], imu["yaw_rate_std"]), seed=sc["sim_seed"], substeps=max(1, int(round(dt / 1e-3))),
+        vibration=None if vib is None else (vib["std"], vib["f_low"], vib["f_high"]),
+        offsets=(imu["ay_offset"], imu["yaw_rate_offset"]),
+    )  # fmt: skip
+    return sensors, truth, tires, nominal, truth_vehicle
+
+
+def imu_truth_summary(truth: dict, tires) -> dict:
+    """How hard the truth was driven; ``valid`` is False past a tire's force peak (lost control)."""
+    slip = np.abs(np.column_stack([truth["true_alpha_f"], truth["true_alpha_r"]]))
+    peak = [float(np.degrees(t.peak_slip)) for t in tires]
+    out = {"max_abs_slip_deg": [float(np.degrees(np.nanmax(slip[:, j]))) for j in range(2)], "tire_peak_slip_deg": peak,
+           "finite": bool(np.all(np.isfinite(slip)))}  # fmt: skip
+    out["valid"] = bool(out["finite"] and all(out["max_abs_slip_deg"][j] <= peak[j] for j in range(2)))
+    return out
+
+
+def _rmse_deg(a, b) -> float:
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    ok = np.isfinite(a) & np.isfinite(b)
+    return float(np.degrees(np.sqrt(np.mean((a[ok] - b[ok]) ** 2)))) if ok.any() else float("nan")
+
+
+def _curve_nrmse(curve, true_curve, true_slip) -> list[float]:
+    from tire_learning_env.metrics import curve_nrmse, excited_range
+
+    return [curve_nrmse(curve, true_curve, a, *excited_range(true_slip[:, j])) for j, a in enumerate(AXLES)]
+
+
+def _score_core(res, k_true, true_curve, true_slip) -> dict:
+    """Stiffness, band, verdict and curve of a core ``EstimationResult`` (or the core of an ``ImuEstimate``)."""
+    k, sd = res.cornering_stiffness(), res.cornering_stiffness_std()
+    rep = res.stiffness_report()
+    return {
+        "stiffness_error_pct": [100.0 * (k[j] / k_true[j] - 1.0) for j in range(2)],
+        "stiffness_N_per_rad": list(k),
+        "std_N_per_rad": list(sd),
+        "covered_2sigma": [_covered(k[j], sd[j], k_true[j]) for j in range(2)],
+        "identified": [bool(rep[a]["identified"]) for a in AXLES],
+        "verdict": res.verdict,
+        "curve_nrmse": _curve_nrmse(res.axle_force, true_curve, true_slip),
+    }
+
+
+def _build_with_redraws(sc: dict, build_fn, summary_fn):
+    """Build ``sc``; a drive whose truth lost control is redrawn (attempt 1..MAX_REDRAWS), as ``run_scenario``."""
+    rejected = []
+    while True:
+        built = build_fn(sc)
+        ts = summary_fn(built)
+        if ts["valid"] or sc.get("attempt", 0) >= MAX_REDRAWS or "base_seed" not in sc:
+            return sc, built, ts, rejected
+        rejected.append({"scenario": sc, "truth_summary": ts})
+        sc = sample_scenario(sc["family"], sc["index"], sc["base_seed"], sc["quick"], sc.get("attempt", 0) + 1)
+
+
+def run_imu_scenario(sc: dict) -> dict:
+    """An IMU family scenario: the package's IMU path (``imu.estimate_imu``, defaults: the observer refined
+    offline and its IMM blend with the linear KF, as ``tire-learning estimate`` on an IMU log) and the
+    linear KF it runs beside the observer (the same measured noise, the vehicle file's stiffness). Never raises."""
+    out: dict = {"scenario": sc}
+    t0 = time.perf_counter()
+    try:
+        sc, (sensors, truth, tires, nominal, truth_vehicle), ts, rejected = _build_with_redraws(
+            sc, build_imu, lambda b: imu_truth_summary(b[1], b[2]))  # fmt: skip
+    except Exception as exc:  # noqa: BLE001
+        out["error"] = {"stage": "simulate", "message": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()[-1500:]}
+        return out
+    out.update(scenario=sc, rejected_draws=rejected, simulate_s=time.perf_counter() - t0, truth_summary=ts)
+    k_true = (truth_vehicle.Cf, truth_vehicle.Cr)  # slope of the Pacejka truth at zero slip, per tire
+    out["true_stiffness_N_per_rad"] = list(k_true)
+    out["nominal_stiffness_N_per_rad"] = [nominal.Cf, nominal.Cr]
+    out["nominal_error_pct"] = [100.0 * ((nominal.Cf, nominal.Cr)[j] / k_true[j] - 1.0) for j in range(2)]
+    out["rows"] = int(len(sensors["t"]))
+
+    def true_curve(a, axle):
+        return tires[0 if axle == "front" else 1].lateral_force(a)
+
+    beta = np.asarray(truth["true_beta"], dtype=float)
+    true_slip = np.column_stack([truth["true_alpha_f"], truth["true_alpha_r"]])
+    try:
+        from tire_learning_env.imu import estimate_imu
+
+        res = estimate_imu(sensors, nominal)
+        core, kf = res.core, res.kalman
+        rt = res.runtime_s
+        out["imu_observer"] = {
+            "what": "reported estimate of imu.estimate_imu (refined observer blended with the linear KF by IMM)",
+            "sideslip_rmse_deg": _rmse_deg(res.blend.beta, beta),
+            "sideslip_rmse_deg_by_pass": {
+                "reported_blend": _rmse_deg(res.blend.beta, beta), "online_blend_causal": _rmse_deg(res.blend_online.beta, beta),
+                "observer_refined": _rmse_deg(core.trace.beta, beta), "observer_online_causal": _rmse_deg(core.online.beta, beta),
+            },  # fmt: skip
+            "slip_rmse_deg": [_rmse_deg(res.blend.slip[:, j], true_slip[:, j]) for j in range(2)],
+            **_score_core(core, k_true, true_curve, true_slip),
+            "noise_measured": list(res.noise["std"]),
+            "blend_observer_share": float(np.nanmean(res.blend.mu_observer)),
+            "runtime_s": float(rt.get("total", 0.0) - rt.get("linear_kf", 0.0)),
+        }
+        out["linear_kf"] = {
+            "what": "baselines.LinearKalmanFilter as run by estimate_imu: measured IMU noise, the vehicle file's 2 Cf, 2 Cr",
+            "settings": res.kalman_filter.settings(),
+            "sideslip_rmse_deg": _rmse_deg(kf.beta, beta),
+            "slip_rmse_deg": [_rmse_deg(kf.slip[:, j], true_slip[:, j]) for j in range(2)],
+            "stiffness_error_pct": list(out["nominal_error_pct"]),  # fixed linear tires: the vehicle file's
+            "covered_2sigma": [],
+            "curve_nrmse": _curve_nrmse(res.nominal_axle_force, true_curve, true_slip),
+            "runtime_s": float(rt.get("linear_kf", 0.0)),
+        }
+    except Exception as exc:  # noqa: BLE001
+        err = {"error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()[-1500:]}
+        out["imu_observer"], out["linear_kf"] = err, dict(err)
+    out["wall_s"] = time.perf_counter() - t0
+    return out
+
+
+def add_imu_channels(sensors: dict, spec: dict, seed: int) -> dict:
+    """The simulator's exact ``ay``/``yaw_rate`` as an IMU: sampled at ``rate_hz`` (NaN between samples),
+    white noise and constant offsets (``spec``)."""
+    s = dict(sensors)
+    t = np.asarray(s["t"], dtype=float)
+    n = len(t)
+    rng = np.random.default_rng([seed, 16])
+    keep = np.zeros(n, dtype=bool)
+    period = 1.0 / spec["rate_hz"]
+    k = np.floor((t - t[0]) / period + 1e-6)
+    keep[np.r_[True, np.diff(k) > 0]] = True  # first row at or after each sample instant
+    for col, std, off in (("ay", spec["ay_std"], spec["ay_offset"]), ("yaw_rate", spec["yaw_rate_std"], spec["yaw_rate_offset"])):
+        z = np.asarray(s[col], dtype=float) + rng.normal(0.0, std, n) + off
+        s[col] = np.where(keep, z, np.nan)
+    return s
+
+
+def run_fused_scenario(sc: dict) -> dict:
+    """A fused-family scenario: ``observer.estimate`` with ``sensors`` camera, imu and both on the same log
+    (defaults otherwise). Never raises."""
+    from tire_learning_env.observer import ObserverConfig, estimate
+
+    out: dict = {"scenario": sc}
+    t0 = time.perf_counter()
+    try:
+        sc, (log, plant, truth_vehicle, nominal, true_curve, k_true), ts, rejected = _build_with_redraws(
+            sc, build, lambda b: truth_summary(b[0], b[1], sc))  # fmt: skip
+    except Exception as exc:  # noqa: BLE001
+        out["error"] = {"stage": "simulate", "message": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()[-1500:]}
+        return out
+    out.update(scenario=sc, rejected_draws=rejected, simulate_s=time.perf_counter() - t0, truth_summary=ts)
+    out["true_stiffness_N_per_rad"] = list(k_true)
+    out["nominal_stiffness_N_per_rad"] = [nominal.Cf, nominal.Cr]
+    out["nominal_error_pct"] = [100.0 * ((nominal.Cf, nominal.Cr)[j] / k_true[j] - 1.0) for j in range(2)]
+    sensors = add_imu_channels(log.sensors, sc["imu"], sc["sim_seed"])
+    true_slip = np.asarray(log.truth["true_slip"], dtype=float)
+    xs = np.asarray(log.truth["true_state"], dtype=float)
+    vx = np.asarray(sensors["vx"], dtype=float)
+    beta = np.arctan2(xs[:, 1] - vx * xs[:, 2], vx)  # vy = e1_dot - vx e2
+    for name in ESTIMATORS[FUSED]:
+        try:
+            t1 = time.perf_counter()
+            res = estimate(sensors, nominal, config=ObserverConfig(sensors=name))
+            wall = time.perf_counter() - t1
+            tr = res.trace
+            out[name] = {
+                **_score_core(res, k_true, true_curve, true_slip),
+                "slip_rmse_deg": [_rmse_deg(tr.slip[:, j], true_slip[:, j]) for j in range(2)],
+                "sideslip_rmse_deg": _rmse_deg(tr.beta, beta),
+                "sensors_run": res.sensors,
+                "runtime_s": float(res.runtime_s.get("total", wall)),
+            }
+        except Exception as exc:  # noqa: BLE001
+            out[name] = {"error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()[-1500:]}
+    out["wall_s"] = time.perf_counter() - t0
+    return out
+
+
+def run_any(sc: dict) -> dict:
+    """Run the scenario with its family's estimators."""
+    if sc["family"] in IMU_FAMILIES:
+        return run_imu_scenario(sc)
+    if sc["family"] == FUSED:
+        return run_fused_scenario(sc)
+    return run_scenario(sc)
+
+
+# --------------------------------------------------------------------------------------------
 # aggregation
 # --------------------------------------------------------------------------------------------
 def _stats(values: list[float]) -> dict | None:
@@ -476,17 +774,96 @@ def _valid(r: dict) -> bool:
     return bool(r.get("truth_summary", {}).get("valid", True))
 
 
+def summarise_extra(records: list[dict], est: str) -> dict:
+    """Statistics of one estimator of an IMU or fused family (both axles pooled, one sample per axle)."""
+    ok = [r[est] for r in records if est in r and "error" not in r[est]]
+    out = {
+        "scenarios": len(records),
+        "succeeded": len(ok),
+        "failed": len(records) - len(ok),
+        "sideslip_rmse_deg": _stats([r.get("sideslip_rmse_deg") for r in ok]),
+        "abs_stiffness_error_pct": _stats([abs(e) for r in ok for e in r["stiffness_error_pct"]]),
+        "curve_nrmse_pct": _stats([100.0 * e for r in ok for e in r["curve_nrmse"]]),
+        "slip_rmse_deg": _stats([e for r in ok for e in r["slip_rmse_deg"]]),
+        "runtime_s": _stats([r["runtime_s"] for r in ok]),
+    }
+    cov = [c for r in ok for c in r.get("covered_2sigma", [])]
+    out["band_coverage"] = {"fraction": float(np.mean(cov)) if cov else None, "n": len(cov)}
+    if any("verdict" in r for r in ok):
+        verdicts: dict = {}
+        for r in ok:
+            verdicts[r["verdict"]] = verdicts.get(r["verdict"], 0) + 1
+        out["verdict_counts"] = verdicts
+    if est == "imu_observer":
+        passes = sorted({k for r in ok for k in r.get("sideslip_rmse_deg_by_pass", {})})
+        out["sideslip_rmse_deg_by_pass"] = {k: _stats([r["sideslip_rmse_deg_by_pass"].get(k) for r in ok]) for k in passes}
+    return out
+
+
+EXTRA_TARGETS = {
+    **{f: {"imu_observer_no_worse_than_linear_kf": "sideslip RMSE of the reported IMU estimate <= the linear KF's on every "
+                                                   "scenario of the family",
+           "imu_observer_median_better": "median sideslip RMSE of the reported IMU estimate < the linear KF's"}
+       for f in IMU_FAMILIES},
+    FUSED: {"fusion_beats_better_single_sensor": "median |stiffness error| of sensors='both' < the smaller of the camera's "
+                                                 "and the IMU's medians"},
+    "note": "issue 16 targets; over the scenarios whose truth stayed under control",
+}  # fmt: skip
+
+
+def check_extra_targets(families: dict) -> dict:
+    out = {}
+    for fam, block in families.items():
+        if fam not in EXTRA_FAMILIES:
+            continue
+        recs = [r for r in block["scenarios"] if _valid(r)]
+        res: dict = {}
+        if fam in IMU_FAMILIES:
+            pairs = [(r["imu_observer"]["sideslip_rmse_deg"], r["linear_kf"]["sideslip_rmse_deg"], r["scenario"]["index"])
+                     for r in recs if "error" not in r.get("imu_observer", {"error": 1})
+                     and "error" not in r.get("linear_kf", {"error": 1})]  # fmt: skip
+            failed = [r["scenario"]["index"] for r in recs if (r.get("imu_observer") or {}).get("error") or "error" in r]
+            worse = [{"index": i, "imu_observer_deg": a, "linear_kf_deg": b} for a, b, i in pairs if not a <= b]
+            res["imu_observer sideslip <= linear_kf on every scenario"] = {
+                "measured": f"{len(pairs) - len(worse)} of {len(pairs)} scenarios", "worse": worse,
+                "max_ratio": max((a / b for a, b, _ in pairs if b > 0), default=None), "failed_scenarios": failed,
+                "met": bool(pairs and not worse and not failed),
+            }  # fmt: skip
+            if pairs:
+                mo, mk = float(np.median([a for a, _, _ in pairs])), float(np.median([b for _, b, _ in pairs]))
+                res["imu_observer median sideslip < linear_kf"] = {"measured": mo, "linear_kf": mk, "met": bool(mo < mk)}
+        else:
+            med = {}
+            for est in ESTIMATORS[FUSED]:
+                st = summarise_extra(recs, est)["abs_stiffness_error_pct"]
+                med[est] = None if st is None else st["median"]
+            if all(v is not None for v in med.values()):
+                best = min(med["camera"], med["imu"])
+                res["both median abs stiffness error < min(camera, imu)"] = {
+                    "measured": med["both"], "camera": med["camera"], "imu": med["imu"], "met": bool(med["both"] < best)}
+            else:
+                res["both median abs stiffness error < min(camera, imu)"] = {"measured": med, "met": False}
+        out[fam] = res
+    return out
+
+
 def aggregate(records_by_family: dict, meta: dict) -> dict:
     fams = {}
     for fam, recs in records_by_family.items():
         recs = sorted(recs, key=lambda r: r["scenario"]["index"])
         valid = [r for r in recs if _valid(r)]
+        if fam in EXTRA_FAMILIES:
+            ests = ESTIMATORS[fam]
+            fams[fam] = {"held_out": False, "estimators": list(ests), **{e: summarise_extra(recs, e) for e in ests},
+                         "truth_invalid_scenarios": [r["scenario"]["index"] for r in recs if not _valid(r)],
+                         "valid_truth_only": {e: summarise_extra(valid, e) for e in ests}, "scenarios": recs}  # fmt: skip
+            continue
         fams[fam] = {"held_out": fam == HELD_OUT, "observer": summarise(recs, "observer"), "ukf": summarise(recs, "ukf"),
                      "truth_invalid_scenarios": [r["scenario"]["index"] for r in recs if not _valid(r)],
                      "valid_truth_only": {"observer": summarise(valid, "observer"), "ukf": summarise(valid, "ukf")},
                      "scenarios": recs}  # fmt: skip
     all_cov = [c for recs in records_by_family.values() for r in recs for c in r.get("observer", {}).get("covered_2sigma", [])]
-    return {
+    out = {
         "benchmark": "generalization",
         **meta,
         "families": fams,
@@ -494,6 +871,10 @@ def aggregate(records_by_family: dict, meta: dict) -> dict:
         "targets": TARGETS,
         "target_check": check_targets(fams),
     }
+    if any(f in EXTRA_FAMILIES for f in fams):  # issue 16's families: their own targets beside the camera ones
+        out["targets"] = {**TARGETS, **{f: v for f, v in EXTRA_TARGETS.items() if f in fams or f == "note"}}
+        out["target_check"].update(check_extra_targets(fams))
+    return out
 
 
 def _jsonable(x):
@@ -544,6 +925,8 @@ def markdown_table(result: dict) -> str:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for fam, block in result["families"].items():
+        if fam in EXTRA_FAMILIES:
+            continue
         valid = block["valid_truth_only"]
         nval = block["observer"]["scenarios"] - len(block["truth_invalid_scenarios"])
         for est in ("observer", "ukf"):
@@ -558,11 +941,52 @@ def markdown_table(result: dict) -> str:
                 f"{cov_txt} | {verd} | "
                 f"{f(block[est], 'runtime_s', digits=1)} |"
             )
+    if not any(f not in EXTRA_FAMILIES for f in result["families"]):
+        lines = []
+    if any(f in EXTRA_FAMILIES for f in result["families"]):
+        if lines:
+            lines.append("")
+        lines += _markdown_extra(result, f)
     s = result.get("settings", {})
     lines += ["", f"n = {s.get('n_per_family')} per family, seed {s.get('seed')}, quick = {s.get('quick')}; statistics over "
               "scenarios whose truth stayed under control (see `truth_invalid_scenarios`), both axles pooled; "
               "runtime over all scenarios."]  # fmt: skip
     return "\n".join(lines) + "\n"
+
+
+def _markdown_extra(result: dict, f) -> list[str]:
+    """Rows of the IMU and fused families (issue 16) and their target checks."""
+    lines = [
+        "| family | estimator | valid / scenarios | sideslip RMSE deg (median / p90 / worst) | abs stiffness error % | "
+        "curve NRMSE % | band coverage | verdicts | runtime s |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for fam, block in result["families"].items():
+        if fam not in EXTRA_FAMILIES:
+            continue
+        ests = block["estimators"]
+        nsc = block[ests[0]]["scenarios"]
+        nval = nsc - len(block["truth_invalid_scenarios"])
+        for est in ests:
+            v = block["valid_truth_only"][est]
+            cov = v["band_coverage"]["fraction"]
+            cov_txt = "n/a" if cov is None else f"{100 * cov:.0f} % of {v['band_coverage']['n']}"
+            verd = ", ".join(f"{k} {n}" for k, n in (v.get("verdict_counts") or {}).items()) or "-"
+            stiff = f(v, "abs_stiffness_error_pct") + (" (vehicle file)" if est == "linear_kf" else "")
+            lines.append(
+                f"| {fam} | {est} | {nval} / {nsc} (failed {v['failed']}) | {f(v, 'sideslip_rmse_deg', digits=3)} | "
+                f"{stiff} | {f(v, 'curve_nrmse_pct')} | {cov_txt} | {verd} | {f(block[est], 'runtime_s', digits=1)} |"
+            )
+    lines.append("")
+    for fam, checks in result.get("target_check", {}).items():
+        if fam not in EXTRA_FAMILIES:
+            continue
+        for name, c in checks.items():
+            meas = c.get("measured")
+            meas = f"{meas:.4g}" if isinstance(meas, float) else meas
+            extra = ", ".join(f"{k} {c[k]:.4g}" for k in ("linear_kf", "camera", "imu") if isinstance(c.get(k), float))
+            lines.append(f"- {fam}: {name}: {'met' if c['met'] else 'MISSED'} (measured {meas}{'; ' + extra if extra else ''})")
+    return lines
 
 
 # --------------------------------------------------------------------------------------------
@@ -623,7 +1047,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--quick", action="store_true", help="short logs (12 s, camera <= 25 Hz), 2 per family")
     ap.add_argument("--seed", type=int, default=15)
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--families", default=",".join(FAMILIES))
+    ap.add_argument("--families", default=",".join(FAMILIES),
+                    help=f"comma-separated, of {', '.join(ALL_FAMILIES)} (default: the camera families)")
     ap.add_argument("--long", action="store_true", help="also time one long 100 Hz lane-change log")
     ap.add_argument("--long-minutes", type=float, default=30.0)
     ap.add_argument("--out", default=None)
@@ -644,8 +1069,12 @@ def main(argv: list[str] | None = None) -> dict:
         print(json.dumps(result, indent=2))
         return result
     n = args.n if args.n is not None else (2 if args.quick else 5)
-    out_path = Path(args.out) if args.out else RESULTS_DIR / ("generalization_quick.json" if args.quick else "generalization.json")
     families = [f.strip() for f in args.families.split(",") if f.strip()]
+    unknown = [f for f in families if f not in ALL_FAMILIES]
+    if unknown:
+        ap.error(f"unknown families {unknown}; choose from {', '.join(ALL_FAMILIES)}")
+    stem = "generalization_imu" if families and all(f in EXTRA_FAMILIES for f in families) else "generalization"
+    out_path = Path(args.out) if args.out else RESULTS_DIR / (f"{stem}_quick.json" if args.quick else f"{stem}.json")
     scenarios = [sample_scenario(f, i, args.seed, args.quick) for f in families for i in range(n)]
     meta = {
         "settings": {"n_per_family": n, "quick": args.quick, "seed": args.seed, "workers": args.workers, "families": families},
@@ -675,7 +1104,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     if args.workers > 1:
         with ProcessPoolExecutor(max_workers=args.workers) as ex:
-            futs = {ex.submit(run_scenario, sc): sc for sc in scenarios}
+            futs = {ex.submit(run_any, sc): sc for sc in scenarios}
             for fut in as_completed(futs):
                 try:
                     rec = fut.result()
@@ -684,7 +1113,7 @@ def main(argv: list[str] | None = None) -> dict:
                 done(rec)
     else:
         for sc in scenarios:
-            done(run_scenario(sc))
+            done(run_any(sc))
     if bar:
         bar.close()
     result = aggregate(by_family, meta | {"complete": True, "elapsed_s": time.perf_counter() - t_start})

@@ -94,3 +94,61 @@ def test_full_benchmark(tmp_path):
     _, written, _ = _run(tmp_path, timeout=3600)
     _check_structure(written, written["settings"]["n_per_family"])
     assert written["families"]["low_order_pacejka"]["observer"]["abs_stiffness_error_pct"]["median"] < 5.0
+
+
+# -- issue 16: the IMU and fused families ------------------------------------------------------
+EXTRA = ("imu_white", "imu_vibration_bias", "fused")
+EXTRA_ESTIMATORS = {"imu_white": ("imu_observer", "linear_kf"), "imu_vibration_bias": ("imu_observer", "linear_kf"),
+                    "fused": ("camera", "imu", "both")}  # fmt: skip
+
+
+def test_quick_imu_and_fused_families(tmp_path):
+    printed, written, _ = _run(tmp_path, "--quick", "--n", "1", "--workers", "2", "--families", ",".join(EXTRA), timeout=240)
+    assert printed == written and written["complete"] is True
+    assert set(written["families"]) == set(EXTRA)
+    for fam in EXTRA:
+        block = written["families"][fam]
+        assert block["estimators"] == list(EXTRA_ESTIMATORS[fam])
+        assert len(block["scenarios"]) == 1
+        rec = block["scenarios"][0]
+        assert "error" not in rec, rec.get("error")
+        for est in EXTRA_ESTIMATORS[fam]:
+            assert "error" not in rec[est], rec[est].get("error")
+            assert block[est]["succeeded"] == 1
+            assert len(rec[est]["stiffness_error_pct"]) == 2
+            assert 0.0 <= rec[est]["sideslip_rmse_deg"] < 2.0  # tracked (deg)
+        assert fam in written["target_check"]
+    sc = [written["families"][f]["scenarios"][0]["scenario"] for f in EXTRA]
+    assert sc[0]["rate_hz"] <= 200.0 and sc[0]["duration_s"] == 15.0 and sc[2]["duration_s"] == 12.0
+    # the fused estimators ran the sensor sets they were asked for, on the same log
+    assert [written["families"]["fused"]["scenarios"][0][e]["sensors_run"] for e in ("camera", "imu", "both")] == [
+        "camera", "imu", "both"]  # fmt: skip
+    # the IMU record keeps the observer's own passes beside the reported blend
+    imu = written["families"]["imu_white"]["scenarios"][0]["imu_observer"]
+    assert set(imu["sideslip_rmse_deg_by_pass"]) >= {"reported_blend", "observer_refined", "observer_online_causal"}
+    md = (tmp_path / "generalization.md").read_text()
+    assert "imu_observer" in md and "both" in md
+
+
+def test_imu_and_fused_scenarios_are_seeded_and_in_range():
+    sys.path.insert(0, str(BENCH.parent))
+    try:
+        import bench_generalization as bg
+    finally:
+        sys.path.remove(str(BENCH.parent))
+    a = [bg.sample_scenario(f, i, 15, False) for f in EXTRA for i in range(8)]
+    assert a == [bg.sample_scenario(f, i, 15, False) for f in EXTRA for i in range(8)]
+    for s in a:
+        if s["family"] == "fused":
+            assert 100.0 <= s["imu"]["rate_hz"] <= 1000.0 and s["truth"]["plant"] == "low_order_pacejka"
+            continue
+        assert s["vehicle"] in bg.IMU_VEHICLES and 50.0 <= s["rate_hz"] <= 1000.0
+        lo, hi = s["speed"]["range"]
+        assert 10.0 <= lo < hi <= 60.0
+        imu = s["imu"]
+        total = (imu["ay_white_std"] ** 2 + (imu["vibration"]["std"] ** 2 if imu["vibration"] else 0.0)) ** 0.5
+        assert 0.2 <= total <= 5.1
+        if s["family"] == "imu_white":
+            assert imu["vibration"] is None and imu["ay_offset"] == 0.0 and imu["yaw_rate_offset"] == 0.0
+        else:
+            assert abs(imu["ay_offset"]) <= 0.5 and abs(imu["yaw_rate_offset"]) <= 0.01

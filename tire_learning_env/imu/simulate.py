@@ -6,8 +6,11 @@ classical RK4 at ``substeps`` per sample, a speed profile between ``speed_range`
 measured ``vx`` is an input, as on the real car) and a steering pattern that sweeps the
 lateral acceleration up to ``ay_max`` in both directions (a feed-forward on the kinematic
 steering angle plus a light yaw-rate feedback, like a driver). The IMU adds white noise
-to ``a_y`` and ``r``. Returns the shared log columns (``t, vx, delta, yaw_rate, ay, ax``)
-and the truth (``true_vy``, ``true_beta``, slips, axle forces) apart.
+to ``a_y`` and ``r``, optionally band-limited vibration on ``a_y`` (engine and road: white
+noise through a 2nd-order Butterworth band-pass, scaled to the given std; the band is cut at
+0.9 of the Nyquist frequency of the sample rate) and constant sensor offsets. Returns the
+shared log columns (``t, vx, delta, yaw_rate, ay, ax``) and the truth (``true_vy``,
+``true_beta``, slips, axle forces) apart.
 """
 
 from __future__ import annotations
@@ -20,7 +23,25 @@ from numpy.typing import NDArray
 from ..params import ParameterError, TireParams, VehicleParams
 from ..tires import PacejkaTire
 
-__all__ = ["simulate_imu_drive"]
+__all__ = ["simulate_imu_drive", "band_limited_noise"]
+
+
+def band_limited_noise(n: int, dt: float, std: float, f_low: float, f_high: float, seed=0) -> NDArray:
+    """``n`` samples of white noise through a 2nd-order Butterworth band-pass ``f_low``-``f_high``
+    [Hz], scaled to std ``std``. At a low sample rate the band is cut at 0.9 of the Nyquist
+    frequency ``1/(2 dt)`` and ``f_low`` lowered to at most half that top (a vibration above
+    the Nyquist frequency appears aliased in the band the log can hold)."""
+    from scipy.signal import butter, sosfilt
+
+    nyq = 0.5 / dt
+    hi = min(f_high, 0.9 * nyq)
+    lo = min(f_low, 0.5 * hi)
+    if not (std >= 0 and 0 < lo < hi):
+        raise ParameterError(f"vibration needs std >= 0 and 0 < f_low < f_high, got {std}, {f_low}, {f_high}")
+    sos = butter(2, [lo / nyq, hi / nyq], btype="band", output="sos")
+    w = sosfilt(sos, np.random.default_rng(seed).normal(size=n + 200))[200:]  # filter transient dropped
+    sd = float(np.std(w))
+    return std * w / sd if sd > 0 else w
 
 
 def simulate_imu_drive(
@@ -35,6 +56,8 @@ def simulate_imu_drive(
     noise_std: tuple[float, float] = (0.5, 0.003),
     seed: int = 0,
     substeps: int = 10,
+    vibration: tuple[float, float, float] | None = None,
+    offsets: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[dict[str, NDArray], dict[str, NDArray], tuple[PacejkaTire, PacejkaTire]]:
     """Simulate a drive; returns ``(sensors, truth, (front_tire, rear_tire))``.
 
@@ -57,6 +80,13 @@ def simulate_imu_drive(
         IMU noise std ``(a_y [m/s^2], r [rad/s])``.
     seed : int
         Noise and steering-pattern seed.
+    substeps : int
+        RK4 steps per sample.
+    vibration : (float, float, float), optional
+        Band-limited ``a_y`` vibration ``(std [m/s^2], f_low [Hz], f_high [Hz])`` added to the
+        white noise (its own generator, seeded from ``seed``: the other draws are unchanged).
+    offsets : (float, float)
+        Constant sensor offsets ``(a_y [m/s^2], r [rad/s])`` added to the measurements.
     """
     if not (duration > 0 and dt > 0 and substeps >= 1):
         raise ParameterError("duration, dt must be > 0 and substeps >= 1")
@@ -118,10 +148,12 @@ def simulate_imu_drive(
         "t": t,
         "vx": vx,
         "delta": delta,
-        "yaw_rate": out[:, 1] + rng.normal(0.0, noise_std[1], n),
-        "ay": ay_true + rng.normal(0.0, noise_std[0], n),
+        "yaw_rate": out[:, 1] + rng.normal(0.0, noise_std[1], n) + float(offsets[1]),
+        "ay": ay_true + rng.normal(0.0, noise_std[0], n) + float(offsets[0]),
         "ax": ax,
     }
+    if vibration is not None and vibration[0] > 0:
+        sensors["ay"] = sensors["ay"] + band_limited_noise(n, dt, *vibration, seed=[seed, 1])
     truth = {
         "true_vy": out[:, 0].copy(),
         "true_beta": np.arctan2(out[:, 0], vx),
