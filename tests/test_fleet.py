@@ -285,3 +285,19 @@ def test_training_sweep_on_ray(tmp_path):
     if ray.is_initialized():
         pytest.skip("needs its own Ray start (a module Ray instance is running)")
     _sweep_and_resume(tmp_path, ["--workers", "2"])
+
+
+def test_batch_discrepancy_rows(fleet, tmp_path):
+    """--command discrepancy: report.json per log, verdict and effects in the row (serial engine: no Ray start)."""
+    out = tmp_path / "disc"
+    assert main(["batch", str(fleet / "drive.csv"), str(fleet / "broken.csv"), "--out", str(out), "--command",
+                 "discrepancy", "--serial", "--no-progress", "--seed", "3"]) == 1  # fmt: skip
+    rows = _summary(out)
+    assert rows["broken"]["status"] == "failed"
+    r = rows["drive"]
+    assert r["status"] == "ok" and r["kind"] == "camera" and int(r["rows"]) > 100
+    report = json.loads((out / "drive" / "report.json").read_text())
+    assert r["verdict"] == report["verdict"] in ("none", "found", "unexplained")
+    assert float(r["gap_ratio"]) == pytest.approx(report["gap_ratio"], rel=1e-5)
+    assert [e.split("(")[0] for e in r["effects"].split("; ") if e] == [e["name"] for e in report["effects"]]
+    assert json.loads((out / "batch.json").read_text())["args"] == ["--seed", "3"]  # --seed reaches the command

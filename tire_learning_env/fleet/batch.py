@@ -228,7 +228,11 @@ def headline(command: str, out: Path) -> dict:
         e["name"] + "(" + ", ".join(f"{k}={_num(v):.4g}" for k, v in (e.get("parameters") or {}).items()) + ")"
         for e in rep.get("effects", [])
     )  # fmt: skip
-    return {"verdict": rep.get("verdict", ""), "effects": effects, "gap_ratio": _num(rep.get("gap_ratio"))}
+    log = rep.get("log") if isinstance(rep.get("log"), dict) else {}
+    channels = (rep.get("comparison") or {}).get("channels") or []
+    kind = ("camera" if "e1" in channels else "imu") if channels else ""
+    return {"verdict": rep.get("verdict", ""), "effects": effects, "gap_ratio": _num(rep.get("gap_ratio")),
+            "rows": log.get("rows", ""), "kind": kind}  # fmt: skip
 
 
 def _fingerprint(path: Path, job: LogJob, extra: str) -> str:
@@ -535,7 +539,7 @@ def _fleet_figure(path: Path, rows: list[dict], command: str) -> None:
             sel = [i for i, r in enumerate(done) if r.get("verdict") == verdict]
             if sel:
                 ax.bar(x[sel], [_num(done[i].get("gap_ratio")) for i in sel], color=colour, label=f"verdict {verdict}")
-        ax.set_ylabel("gap ratio after / before [-]")
+        ax.set_ylabel("gap ratio: model-log gap before / after the named effects [-]")
         ax.set_title(f"fleet: model discrepancy per log ({len(done)} of {len(rows)} logs analysed)")
     ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=7)
     if done:
