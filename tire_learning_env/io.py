@@ -272,10 +272,10 @@ def _parse_csv(text: str, source: str, notes: list[str]) -> tuple[list[str], dic
 
 def read_log(path: str | Path, min_rows: int = 2, check_units: bool | None = None,
              sensors: str = "auto", channel_map: str | Path | None = None) -> DrivingLog:
-    """Read a driving log in the shared CSV format (or, by suffix, a logger's MF4, Parquet or MCAP file).
+    """Read a driving log in the shared CSV format (or, by suffix, a logger's MF4, Parquet, MCAP or ROS 2 bag).
 
-    ``.mf4``/``.mdf``, ``.parquet``/``.pq`` and ``.mcap`` files go to
-    :func:`tire_learning_env.formats.read_logger_log` with ``channel_map`` (None: a
+    ``.mf4``/``.mdf``, ``.parquet``/``.pq``, ``.mcap`` files and ROS 2 bag folders (``.db3``) go
+    to :func:`tire_learning_env.formats.read_logger_log` with ``channel_map`` (None: a
     ``<stem>.channels.yaml``/``.json`` beside the log, else channels named as the columns);
     everything else is read as CSV below.
 
@@ -305,8 +305,8 @@ def read_log(path: str | Path, min_rows: int = 2, check_units: bool | None = Non
     if sensors not in ("auto", "camera", "imu"):
         raise ValueError(f"sensors must be 'auto', 'camera' or 'imu', got {sensors!r}")
     path = Path(path)
-    if path.suffix.lower() in (".mf4", ".mdf", ".parquet", ".pq", ".mcap"):
-        from .formats import read_logger_log
+    if path.suffix.lower() in (".mf4", ".mdf", ".parquet", ".pq", ".mcap", ".db3") or (path / "metadata.yaml").is_file():
+        from .formats import read_logger_log  # logger files and ROS 2 bag folders
 
         return read_logger_log(path, channel_map, min_rows=min_rows, check_units=check_units, sensors=sensors)
     source = str(path)
