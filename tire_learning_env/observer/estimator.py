@@ -47,7 +47,8 @@ from .neuro_adaptive import AdaptationParams, HealthParams, NeuroAdaptiveObserve
 from .offline import OfflineFit, calibrate_force_error, curve_gradient, pem_cost, refine, select_prior_length, stiffness_readout
 from .trace import EstimateTrace
 
-__all__ = ["ObserverConfig", "build_observer", "estimate", "EstimationResult", "detect_sensors", "NOISE_FLOOR"]
+__all__ = ["ObserverConfig", "build_observer", "estimate", "EstimationResult", "detect_sensors", "fusion_fallback",
+           "NOISE_FLOOR"]
 
 #: smallest noise std used per channel (e1 [m], e2 [rad], a_y [m/s^2], r [rad/s]): resolution
 NOISE_FLOOR = np.array([1e-4, 1e-4, 0.01, 1e-4])
@@ -198,6 +199,29 @@ def detect_sensors(sensors: Mapping[str, ArrayLike]) -> str:
     if imu:
         return "imu"
     raise ParameterError("the log has neither camera columns (e1, e2, kappa) nor IMU columns (ay, yaw_rate) with data")
+
+
+def fusion_fallback(sensors: Mapping[str, ArrayLike]) -> tuple[str, str | None]:
+    """The sensor set ``sensors="both"`` runs on: ``both``, or the one sensor the log has when the
+    other has no sample in the whole log (``camera`` without ``ay``/``yaw_rate`` data, ``imu``
+    without ``e1``/``e2`` data), with the reason (``None`` when both are present).
+
+    The fused design is not the single-sensor one with a channel missing: its basis has no
+    constant-force member and its gains are certified for the fused output, so a fused pass
+    on a log without IMU samples would be a different camera estimator. With a sensor absent
+    from the whole log nothing is there to fuse, and the estimate is exactly that of the
+    sensor present (``calibration["fusion_fallback"]`` says so). A sensor that drops out for
+    a while is handled by the fused design itself (NaN rows)."""
+
+    def has(k):
+        return k in sensors and bool(np.any(np.isfinite(np.asarray(sensors[k], dtype=float))))
+
+    cam, imu = has("e1") or has("e2"), has("ay") or has("yaw_rate")
+    if cam and not imu:
+        return "camera", "sensors='both' requested, but the log has no IMU sample (ay, yaw_rate): the camera estimator ran"
+    if imu and not cam:
+        return "imu", "sensors='both' requested, but the log has no camera frame (e1, e2): the IMU estimator ran"
+    return "both", None
 
 
 def _basis_for(model: MeasurementModel, config: ObserverConfig, vehicle: VehicleParams) -> SoftClipBasis:
@@ -592,6 +616,9 @@ def estimate(
     t_all = time.perf_counter()
     runtime: dict = {}
     name = detect_sensors(sensors) if config.sensors == "auto" else config.sensors
+    fallback = None
+    if name == "both":  # a sensor absent from the whole log: the other one's estimator, exactly
+        name, fallback = fusion_fallback(sensors)
     model = measurement_model(name)
     from .neuro_adaptive import sensor_rows
 
@@ -623,6 +650,7 @@ def estimate(
     calibration = {
         "sensors": model.name,
         "sensors_source": "detected from the log's columns" if config.sensors == "auto" else "given",
+        **({"fusion_fallback": {"requested": "both", "ran": model.name, "reason": fallback}} if fallback else {}),
         "noise": noise_info,
         "frame_period_s": frame_period,
         "imu_period_s": imu_period,
