@@ -410,7 +410,7 @@ def refine(
 def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit,
                         lengths: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0), gate: float = 25.0,
                         max_iter: int = 2, tol: float = 1e-3, min_decrease: float = 1e-2,
-                        plausible_nats: float = 5.0) -> tuple[OfflineFit, dict]:  # fmt: skip
+                        plausible_nats: float = 5.0, choose: bool = True) -> tuple[OfflineFit, dict]:  # fmt: skip
     """The smooth-curve prior's length scale [deg] chosen by the log's evidence (type-II maximum likelihood).
 
     The prior :meth:`~.basis.SoftClipBasis.slope_prior` correlates the slopes of neighbouring
@@ -426,7 +426,9 @@ def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: Off
 
     The neighbouring lengths of the grid whose evidence is within ``plausible_nats`` of the
     best (a Bayes factor below e^5, short of "very strong" on the Kass-Raftery scale) are
-    answers the log cannot rule out: their weight differences are kept
+    answers the log cannot rule out (with ``choose=False`` the configured length is kept and
+    its neighbours are judged against it; a neighbour the log prefers is always plausible):
+    their weight differences are kept
     (``fit.prior_alternatives``) and :meth:`OfflineFit.variance` adds the largest squared
     change of a functional among them to its variance (a prior-sensitivity term).
     """
@@ -468,6 +470,9 @@ def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: Off
             best = (ev, float(length), w, Lam)
     info = {"method": "evidence (Laplace) of the smooth-curve prior's length scale", "evidence_by_length_deg": evidence,
             "chosen_deg": a0.prior_length}  # fmt: skip
+    if not choose and float(a0.prior_length) in solutions:  # keep the configured length
+        ev_c, w_c = solutions[float(a0.prior_length)]
+        best = (ev_c, float(a0.prior_length), w_c, None)
     if best is not None:  # the plausible neighbouring lengths: how much the answer leans on the choice
         grid = sorted(solutions)
         i = grid.index(best[1])
