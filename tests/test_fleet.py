@@ -207,12 +207,14 @@ def test_batch_errors_are_one_line(tmp_path, capsys):
 
 
 def test_expand_logs_and_names(tmp_path):
-    for p in ("a/x.csv", "b/x.mf4", "b/y.parquet", "b/.hidden/z.csv", "c/notes.txt"):
+    for p in ("a/x.csv", "b/x.mf4", "b/y.parquet", "b/.hidden/z.csv", "c/notes.txt", "b/bag1/metadata.yaml",
+              "b/bag1/bag1_0.mcap"):  # fmt: skip
         (tmp_path / p).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / p).write_text("")
     logs = expand_logs([tmp_path / "a", str(tmp_path / "b" / "*.parquet"), tmp_path / "b"])
-    assert [p.relative_to(tmp_path).as_posix() for p in logs] == ["a/x.csv", "b/y.parquet", "b/x.mf4"]
-    assert output_names(logs) == ["a__x", "y", "b__x"]
+    # a ROS 2 bag folder is one log (its .mcap is not listed apart)
+    assert [p.relative_to(tmp_path).as_posix() for p in logs] == ["a/x.csv", "b/y.parquet", "b/bag1", "b/x.mf4"]
+    assert output_names(logs) == ["a__x", "y", "bag1", "b__x"]
     with pytest.raises(Exception, match="holds no log"):
         expand_logs([tmp_path / "c"])
 

@@ -12,9 +12,10 @@ import pytest
 pytest.importorskip("asammdf")
 pytest.importorskip("pyarrow")
 pytest.importorskip("mcap")
+pytest.importorskip("rosbags")
 
 from tire_learning_env.formats import (ChannelMap, convert_unit, default_channel_map, load_channel_map,  # noqa: E402
-                                       logger_channel_map, save_channel_map, write_logger_log)
+                                       logger_channel_map, save_channel_map, write_logger_log, write_ros2_bag)
 from tire_learning_env.io import LogFormatError, read_log, write_log  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1] / "tire_learning_env" / "data"
@@ -182,3 +183,29 @@ def test_same_estimate_as_csv(tmp_path, columns):
     assert all(np.all(np.isfinite(ki)) for ki in k)
     for ki in k[1:]:
         np.testing.assert_allclose(ki, k[0], rtol=1e-6)
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_ros2_bag_round_trip(tmp_path, columns, storage):
+    """simulate -> ROS 2 bag (TwistStamped, Imu, Float64 topics; CDR) -> read with the map == the CSV log."""
+    write_log(tmp_path / "drive.csv", columns)
+    csv_log = read_log(tmp_path / "drive.csv")
+    write_ros2_bag(tmp_path / "bag", columns, channel_map=tmp_path / "bag.channels.yaml", storage=storage)
+    log = read_log(tmp_path / "bag")  # the folder; its map is found beside it
+    _same(log, csv_log, rtol=1e-9, atol=1e-12)
+    assert any("bag.channels.yaml (found beside the log)" in n for n in log.notes)
+    assert any("/imu/data:angular_velocity.z" in n or "e1 (" in n for n in log.notes)
+    if storage == "sqlite3":
+        db3 = next((tmp_path / "bag").glob("*.db3"))
+        _same(read_log(db3, channel_map=tmp_path / "bag.channels.yaml"), csv_log, rtol=1e-9, atol=1e-12)
+    else:  # the bag's MCAP file read alone: ROS 2 CDR messages through the MCAP reader
+        mcap_file = next((tmp_path / "bag").glob("*.mcap"))
+        _same(read_log(mcap_file, channel_map=tmp_path / "bag.channels.yaml"), csv_log, rtol=1e-9, atol=1e-12)
+
+
+def test_ros2_missing_topic_is_named(tmp_path, columns):
+    cmap = write_ros2_bag(tmp_path / "bag", columns).to_dict()
+    cmap["columns"]["yaw_rate"]["channel"] = "/imu/dataa:angular_velocity.z"
+    with pytest.raises(LogFormatError, match=r"channel '/imu/dataa:angular_velocity.z' \(column 'yaw_rate'.*"
+                       r"its channels: .*'/imu/data'"):  # fmt: skip
+        read_log(tmp_path / "bag", channel_map=ChannelMap.from_dict(cmap, "edited map"))

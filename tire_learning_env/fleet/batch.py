@@ -47,7 +47,7 @@ from .runner import ItemResult, ResultStore, run_items
 __all__ = ["LOG_SUFFIXES", "COMMANDS", "SUMMARY_COLUMNS", "expand_logs", "output_names", "LogJob", "run_log",
            "run_batch", "BatchResult"]  # fmt: skip
 
-LOG_SUFFIXES = (".csv", ".mf4", ".mdf", ".parquet", ".pq", ".mcap")
+LOG_SUFFIXES = (".csv", ".mf4", ".mdf", ".parquet", ".pq", ".mcap")  # and ROS 2 bag folders
 COMMANDS = ("estimate", "discrepancy")
 STORE_NAME = "batch_results.jsonl"
 MARKER_NAME = "batch.json"
@@ -63,10 +63,14 @@ SUMMARY_COLUMNS = {
 }  # fmt: skip
 
 
+def _is_bag(p: Path) -> bool:
+    return p.is_dir() and (p / "metadata.yaml").is_file()
+
+
 def expand_logs(specs: Sequence[str | Path]) -> list[Path]:
     """Log files named by ``specs``: files, folders (every log below them, recursively,
-    hidden folders skipped) and glob patterns (``**`` allowed). Sorted within a spec,
-    duplicates dropped.
+    hidden folders skipped; a ROS 2 bag folder, which holds ``metadata.yaml``, is one log) and
+    glob patterns (``**`` allowed). Sorted within a spec, duplicates dropped.
 
     Raises
     ------
@@ -79,14 +83,20 @@ def expand_logs(specs: Sequence[str | Path]) -> list[Path]:
         text = str(spec)
         if any(ch in text for ch in "*?["):
             paths = sorted(Path(p) for p in glob.glob(text, recursive=True))
-            paths = [p for p in paths if p.is_file() and p.suffix.lower() in LOG_SUFFIXES]
+            paths = [p for p in paths if (p.is_file() and p.suffix.lower() in LOG_SUFFIXES) or _is_bag(p)]
             if not paths:
                 raise ParameterError(f"the pattern {text!r} matches no log ({', '.join(LOG_SUFFIXES)})")
         else:
             p = Path(text)
-            if p.is_dir():
+            if p.is_dir() and _is_bag(p):
+                paths = [p]
+            elif p.is_dir():
+                bags = sorted(q.parent for q in p.rglob("metadata.yaml")
+                              if not any(part.startswith(".") for part in q.relative_to(p).parts))  # fmt: skip
                 paths = sorted(q for q in p.rglob("*") if q.is_file() and q.suffix.lower() in LOG_SUFFIXES
-                               and not any(part.startswith(".") for part in q.relative_to(p).parts))  # fmt: skip
+                               and not any(part.startswith(".") for part in q.relative_to(p).parts)
+                               and not any(b in q.parents for b in bags))  # fmt: skip
+                paths = sorted(paths + bags)
                 if not paths:
                     raise ParameterError(f"the folder {text} holds no log ({', '.join(LOG_SUFFIXES)})")
             elif p.exists():
@@ -237,6 +247,10 @@ def headline(command: str, out: Path) -> dict:
 
 def _fingerprint(path: Path, job: LogJob, extra: str) -> str:
     st = path.stat()
+    if path.is_dir():  # a ROS 2 bag: its files' sizes and times
+        files = sorted(q for q in path.iterdir() if q.is_file())
+        st = type("S", (), {"st_size": sum(q.stat().st_size for q in files),
+                            "st_mtime_ns": max((q.stat().st_mtime_ns for q in files), default=0)})()  # fmt: skip
     h = hashlib.sha256(json.dumps([job.command, list(job.args), job.channel_map, job.check_units, extra]).encode())
     return f"{st.st_size}:{st.st_mtime_ns}:{h.hexdigest()[:16]}"
 

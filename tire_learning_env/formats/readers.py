@@ -1,4 +1,4 @@
-"""Read logs as vehicle loggers write them: ASAM MDF4 (``.mf4``), Parquet, MCAP.
+"""Read logs as vehicle loggers write them: ASAM MDF4 (``.mf4``), Parquet, MCAP, ROS 2 bags.
 
 Each reader yields the logger's channels (sample times [s], values, the unit stored in the
 file); :func:`read_logger_log` picks the channels a :class:`~.channel_map.ChannelMap` names,
@@ -29,9 +29,26 @@ from numpy.typing import NDArray
 from ..io import SENSOR_COLUMNS, DrivingLog, LogFormatError, _choose_sensors, _validate, check_log_units, current_run_context
 from .channel_map import UNITS, ChannelMap, ChannelSpec, convert_unit, find_channel_map, load_channel_map
 
-__all__ = ["LOGGER_SUFFIXES", "read_logger_log", "read_channels", "RawChannel", "default_channel_map"]
+__all__ = ["LOGGER_SUFFIXES", "read_logger_log", "read_channels", "RawChannel", "default_channel_map", "is_ros2_bag",
+           "logger_format"]
 
-LOGGER_SUFFIXES = {".mf4": "mf4", ".mdf": "mf4", ".parquet": "parquet", ".pq": "parquet", ".mcap": "mcap"}
+LOGGER_SUFFIXES = {".mf4": "mf4", ".mdf": "mf4", ".parquet": "parquet", ".pq": "parquet", ".mcap": "mcap", ".db3": "ros2"}
+
+
+def is_ros2_bag(path: str | Path) -> bool:
+    """True for a ROS 2 bag folder (it holds ``metadata.yaml``) or a ``.db3`` file inside one."""
+    path = Path(path)
+    if path.is_dir():
+        return (path / "metadata.yaml").is_file()
+    return path.suffix.lower() == ".db3"
+
+
+def logger_format(path: str | Path) -> str | None:
+    """``"mf4"``, ``"parquet"``, ``"mcap"``, ``"ros2"`` (a bag folder or its ``.db3``), or None (CSV)."""
+    path = Path(path)
+    if path.is_dir():
+        return "ros2" if is_ros2_bag(path) else None
+    return LOGGER_SUFFIXES.get(path.suffix.lower())
 EVENT_COLUMNS = ("e1", "e2")  # camera frames: NaN where no frame arrived
 EPOCH_THRESHOLD_S = 1e6  # times above this are absolute (epoch) times and are made relative
 
@@ -126,9 +143,51 @@ def _field(obj: Any, path: str) -> Any:
     return obj
 
 
+def _collect(data: dict, wanted: list[str], topic: str, t: float, msg: Any) -> None:
+    """Append the fields of ``msg`` (on ``topic`` at ``t`` [s]) that ``wanted`` names."""
+    for w in wanted:
+        w_topic, _, fld = w.partition(":")
+        if w_topic != topic:
+            continue
+        try:
+            value = _field(msg, fld)
+        except (KeyError, AttributeError, TypeError):
+            continue
+        data[w][0].append(t)
+        data[w][1].append(np.nan if value is None else float(value))
+
+
+class _CdrDecoder:
+    """ROS 2 CDR messages decoded with rosbags' type store (types of the bag registered from
+    their definitions when the store does not know them)."""
+
+    def __init__(self, source: str) -> None:
+        _need("rosbags", "ROS 2 (CDR)", source)
+        from rosbags.typesys import Stores, get_typestore
+
+        self.store = get_typestore(Stores.LATEST)
+        self.source = source
+
+    def register(self, msgtype: str, definition: str | None, kind: str = "msg") -> None:
+        if msgtype in self.store.types or not definition:
+            return
+        from rosbags.typesys import get_types_from_idl, get_types_from_msg
+
+        try:
+            types = get_types_from_idl(definition) if kind == "idl" else get_types_from_msg(definition, msgtype)
+            self.store.register(types)
+        except Exception as exc:  # noqa: BLE001
+            raise LogFormatError(f"{self.source}: cannot read the definition of message type {msgtype!r}: {exc}") from None
+
+    def __call__(self, raw: bytes, msgtype: str) -> Any:
+        if msgtype not in self.store.types:
+            raise LogFormatError(f"{self.source}: message type {msgtype!r} is unknown and the file has no definition of it")
+        return self.store.deserialize_cdr(raw, msgtype)
+
+
 def _mcap_channels(path: Path, source: str, wanted: list[str]) -> tuple[list[str], Callable[[str], RawChannel]]:
-    """MCAP messages -> channels ``topic:field``. JSON messages are decoded here; ROS 2 (CDR)
-    messages need the ``mcap-ros2-support`` package. Times are the messages' log times."""
+    """MCAP messages -> channels ``topic:field``: JSON messages, and ROS 2 (CDR) messages through
+    rosbags. Times are the messages' log times."""
     _need("mcap", "MCAP", source)
     from mcap.reader import make_reader
 
@@ -146,41 +205,65 @@ def _mcap_channels(path: Path, source: str, wanted: list[str]) -> tuple[list[str
                     for k, v in (ch.metadata or {}).items():
                         if k.startswith("unit:"):
                             units[f"{ch.topic}:{k[5:]}"] = v
-            ros2 = None
+            cdr = None
             for schema, channel, message in reader.iter_messages(topics=topics):
                 available.add(channel.topic)
                 if channel.message_encoding == "json":
                     msg = json.loads(message.data)
-                elif channel.message_encoding == "cdr":
-                    if ros2 is None:
-                        ros2 = _need("mcap_ros2.decoder", "ROS 2 (CDR) MCAP", source).DecoderFactory()
-                    msg = ros2.decoder_for(channel.message_encoding, schema)(message.data)
+                elif channel.message_encoding == "cdr" and schema is not None:
+                    if cdr is None:
+                        cdr = _CdrDecoder(source)
+                    cdr.register(schema.name, schema.data.decode(errors="replace"),
+                                 "idl" if schema.encoding == "ros2idl" else "msg")  # fmt: skip
+                    msg = cdr(message.data, schema.name)
                 else:
                     raise LogFormatError(f"{source}: topic {channel.topic!r} has message encoding "
                                          f"{channel.message_encoding!r}; JSON and ROS 2 CDR are supported")  # fmt: skip
-                t = message.log_time * 1e-9
-                for w in wanted:
-                    topic, _, fld = w.partition(":")
-                    if topic != channel.topic:
-                        continue
-                    try:
-                        value = _field(msg, fld)
-                    except (KeyError, AttributeError, TypeError):
-                        continue
-                    data[w][0].append(t)
-                    data[w][1].append(np.nan if value is None else float(value))
+                _collect(data, wanted, channel.topic, message.log_time * 1e-9, msg)
     except LogFormatError:
         raise
     except Exception as exc:  # noqa: BLE001 - mcap raises many types for a corrupt file
         raise LogFormatError(f"{source}: not a readable MCAP file ({type(exc).__name__}: {exc})") from None
+    return sorted(available), _getter(data, units)
 
+
+def _getter(data: dict, units: dict) -> Callable[[str], RawChannel]:
     def get(name: str) -> RawChannel:
         if name not in data or not data[name][0]:
             raise KeyError(name)
         t, v = data[name]
         return RawChannel(name, np.asarray(t), np.asarray(v, dtype=float), units.get(name))
 
-    return sorted(available), get
+    return get
+
+
+# --- ROS 2 bags (rosbag2: sqlite3 or MCAP storage) ------------------------------------------
+def _ros2_channels(path: Path, source: str, wanted: list[str]) -> tuple[list[str], Callable[[str], RawChannel]]:
+    """A ROS 2 bag folder -> channels ``topic:field`` (dots for nested fields, e.g.
+    ``/imu/data:angular_velocity.z``); times are the bag's receive times."""
+    _need("rosbags", "ROS 2 bag", source)
+    from rosbags.rosbag2 import Reader
+
+    bag = path if path.is_dir() else path.parent
+    topics = {w.split(":", 1)[0] for w in wanted}
+    data: dict[str, tuple[list[float], list[float]]] = {w: ([], []) for w in wanted}
+    try:
+        with Reader(bag) as reader:
+            available = sorted({c.topic for c in reader.connections})
+            conns = [c for c in reader.connections if c.topic in topics]
+            cdr = _CdrDecoder(source)
+            for c in conns:
+                msgdef = getattr(c, "msgdef", None)
+                text = getattr(msgdef, "data", msgdef) if msgdef is not None else None
+                fmt = getattr(getattr(msgdef, "format", None), "name", "msg") if msgdef is not None else "msg"
+                cdr.register(c.msgtype, text if isinstance(text, str) else None, "idl" if str(fmt).lower() == "idl" else "msg")
+            for conn, stamp, raw in reader.messages(connections=conns):
+                _collect(data, wanted, conn.topic, stamp * 1e-9, cdr(raw, conn.msgtype))
+    except LogFormatError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - rosbags raises many types for a corrupt bag
+        raise LogFormatError(f"{source}: not a readable ROS 2 bag ({type(exc).__name__}: {exc})") from None
+    return available, _getter(data, {})
 
 
 def read_channels(path: str | Path, channels: list[str]) -> tuple[str, list[str], Callable[[str], RawChannel]]:
@@ -188,17 +271,20 @@ def read_channels(path: str | Path, channels: list[str]) -> tuple[str, list[str]
     :class:`KeyError` for a channel the file lacks."""
     path = Path(path)
     source = str(path)
-    fmt = LOGGER_SUFFIXES.get(path.suffix.lower())
+    fmt = logger_format(path)
     if fmt is None:
-        raise LogFormatError(f"{source}: unknown log suffix {path.suffix!r}; known: .csv, {', '.join(LOGGER_SUFFIXES)}")
-    if not path.is_file():
+        raise LogFormatError(f"{source}: unknown log suffix {path.suffix!r}; known: .csv, {', '.join(LOGGER_SUFFIXES)} "
+                             "and ROS 2 bag folders")  # fmt: skip
+    if not (path.is_file() or (fmt == "ros2" and path.is_dir())):
         raise LogFormatError(f"cannot read log {path}: no such file")
     if fmt == "mf4":
         names, get = _mf4_channels(path, source)
     elif fmt == "parquet":
         names, get = _parquet_channels(path, source)
-    else:
+    elif fmt == "mcap":
         names, get = _mcap_channels(path, source, channels)
+    else:
+        names, get = _ros2_channels(path, source, channels)
     return fmt, names, get
 
 
@@ -269,7 +355,8 @@ def read_logger_log(path: str | Path, channel_map: str | Path | ChannelMap | Non
     Parameters
     ----------
     path : str or Path
-        ``.mf4``/``.mdf``, ``.parquet``/``.pq`` or ``.mcap`` file.
+        ``.mf4``/``.mdf``, ``.parquet``/``.pq`` or ``.mcap`` file, or a ROS 2 bag folder
+        (or its ``.db3``).
     channel_map : str, Path, ChannelMap or None
         Channel map; None looks for ``<stem>.channels.{yaml,yml,json}`` then
         ``channels.{yaml,yml,json}`` beside the log, else uses the channels named like the

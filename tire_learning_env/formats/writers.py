@@ -23,7 +23,8 @@ from ..io import atomic_write_text
 from .channel_map import UNITS, ChannelMap
 from .readers import LOGGER_SUFFIXES
 
-__all__ = ["LOGGER_CHANNELS", "logger_channel_map", "write_logger_log", "save_channel_map", "write_example_logs"]
+__all__ = ["LOGGER_CHANNELS", "logger_channel_map", "write_logger_log", "save_channel_map", "write_example_logs",
+           "write_ros2_bag", "ROS2_CHANNELS"]
 
 # log column -> (logger channel, unit written, scale); the file holds SI / unit factor / scale.
 LOGGER_CHANNELS: dict[str, tuple[str, str, float]] = {
@@ -195,6 +196,94 @@ def _write_mcap(path: Path, cols: Mapping[str, NDArray]) -> None:
                 msg = {f: (None if not np.isfinite(raw[i]) else float(raw[i])) for f, (_, raw) in fields.items()}
                 writer.add_message(channel_ids[topic], log_time=ns, publish_time=ns, data=json.dumps(msg).encode())
         writer.finish()
+
+
+# ROS 2: log column -> (topic, message type, field, unit written, scale); ROS uses SI (REP 103)
+# except the steering-wheel angle, published in degrees as many CAN bridges do.
+ROS2_CHANNELS: dict[str, tuple[str, str, str, str, float]] = {
+    "vx": ("/vehicle/twist", "geometry_msgs/msg/TwistStamped", "twist.linear.x", "m/s", 1.0),
+    "delta": ("/steering/wheel_angle", "std_msgs/msg/Float64", "data", "deg", 1 / 16),
+    "kappa": ("/lane/curvature", "std_msgs/msg/Float64", "data", "1/m", 1.0),
+    "e1": ("/lane/offset", "std_msgs/msg/Float64", "data", "m", 1.0),
+    "e2": ("/lane/heading", "std_msgs/msg/Float64", "data", "rad", 1.0),
+    "yaw_rate": ("/imu/data", "sensor_msgs/msg/Imu", "angular_velocity.z", "rad/s", 1.0),
+    "ay": ("/imu/data", "sensor_msgs/msg/Imu", "linear_acceleration.y", "m/s^2", 1.0),
+    "ax": ("/imu/data", "sensor_msgs/msg/Imu", "linear_acceleration.x", "m/s^2", 1.0),
+}
+
+
+def _ros2_spec(column: str) -> tuple[str, str, str, str, float]:
+    if column in ROS2_CHANNELS:
+        return ROS2_CHANNELS[column]
+    from .channel_map import COLUMN_UNITS
+
+    return (f"/truth/{column}", "std_msgs/msg/Float64", "data", COLUMN_UNITS[column], 1.0)
+
+
+def write_ros2_bag(path: str | Path, columns: Mapping[str, NDArray], channel_map: str | Path | None = None,
+                   storage: str = "sqlite3") -> ChannelMap:  # fmt: skip
+    """Write log-format ``columns`` as a ROS 2 bag folder (rosbags; ``sqlite3`` or ``mcap`` storage).
+
+    Topics: ``/vehicle/twist`` (TwistStamped), ``/imu/data`` (Imu), ``/steering/wheel_angle``
+    (Float64, steering-wheel angle in deg), ``/lane/offset``, ``/lane/heading`` (Float64, only
+    when a camera frame arrived), ``/lane/curvature`` and ``/truth/<column>`` (Float64).
+    Message times (bag and header stamps) are ``t`` [s]. ``path`` must not exist yet.
+
+    Returns
+    -------
+    ChannelMap
+        Reads the bag back into the same columns.
+    """
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.LATEST)
+    T = ts.types
+    path = Path(path)
+    cols = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
+    t = cols["t"]
+    ns = np.round(t * 1e9).astype(np.int64)
+    frame = np.isfinite(cols["e1"]) if "e1" in cols else np.zeros(len(t), bool)
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    by_topic: dict[str, tuple[str, dict[str, NDArray]]] = {}
+    doc: dict = {"time_base": "vx", "columns": {}, "description": "written by tire_learning_env.formats.write_ros2_bag"}
+    for c, v in cols.items():
+        if c == "t":
+            continue
+        topic, msgtype, fld, unit, scale = _ros2_spec(c)
+        by_topic.setdefault(topic, (msgtype, {}))[1][fld] = v / UNITS[unit][1] / scale
+        doc["columns"][c] = {"channel": f"{topic}:{fld}", "unit": unit, **({"scale": scale} if scale != 1.0 else {})}
+    zeros9 = np.zeros(9)
+
+    def stamp(i: int):
+        sec, nsec = divmod(int(ns[i]), 10**9)
+        return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id="base_link")
+
+    def vec(fields: dict, prefix: str, i: int):
+        return T["geometry_msgs/msg/Vector3"](**{a: float(fields.get(f"{prefix}.{a}", np.zeros(len(t)))[i]) for a in "xyz"})
+
+    def message(msgtype: str, fields: dict, i: int):
+        if msgtype == "std_msgs/msg/Float64":
+            return T[msgtype](data=float(fields["data"][i]))
+        if msgtype == "geometry_msgs/msg/TwistStamped":
+            twist = T["geometry_msgs/msg/Twist"](linear=vec(fields, "twist.linear", i), angular=vec(fields, "twist.angular", i))
+            return T[msgtype](header=stamp(i), twist=twist)
+        return T[msgtype](header=stamp(i), orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                          orientation_covariance=zeros9, angular_velocity=vec(fields, "angular_velocity", i),
+                          angular_velocity_covariance=zeros9, linear_acceleration=vec(fields, "linear_acceleration", i),
+                          linear_acceleration_covariance=zeros9)  # fmt: skip
+
+    with Writer(path, version=9, storage_plugin=plugin) as writer:
+        conns = {topic: writer.add_connection(topic, msgtype, typestore=ts) for topic, (msgtype, _) in by_topic.items()}
+        for i in range(len(t)):
+            for topic, (msgtype, fields) in by_topic.items():
+                if topic in ("/lane/offset", "/lane/heading") and not frame[i]:
+                    continue
+                writer.write(conns[topic], int(ns[i]), ts.serialize_cdr(message(msgtype, fields, i), msgtype))
+    cmap = ChannelMap.from_dict(doc, "<ros2 logger map>")
+    if channel_map is not None:
+        save_channel_map(cmap, channel_map)
+    return cmap
 
 
 def write_logger_log(path: str | Path, columns: Mapping[str, NDArray], channel_map: str | Path | None = None) -> ChannelMap:
