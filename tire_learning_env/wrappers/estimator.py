@@ -1,9 +1,13 @@
 """``EstimatorWrapper``: the neuro-adaptive observer running inside any environment.
 
 On every step the wrapper feeds the observer the step's ``info["sensor_log"]`` (what a
-car knows: steering, speed, curvature, camera frames) and nothing else, and puts the
-estimate in ``info["estimate"]``. Ground truth (``true_*`` keys) stays in ``info`` for
-scoring; the observer never reads it.
+car knows: steering, speed, curvature, camera frames, yaw rate and lateral acceleration)
+and nothing else, and puts the estimate in ``info["estimate"]``. Ground truth (``true_*``
+keys) stays in ``info`` for scoring; the observer never reads it.
+
+Measurement model (``sensors``): ``camera`` (default: ``e1``, ``e2``), ``imu`` (``ay``,
+``yaw_rate``; state ``[vy, r]``) or ``both`` (camera and IMU fused), the same observer core
+as :func:`~tire_learning_env.observer.estimate` with ``ObserverConfig(sensors=...)``.
 
 >>> import gymnasium as gym
 >>> import numpy as np
@@ -31,12 +35,18 @@ from numpy.typing import NDArray
 from ..metrics import compute_metrics
 from ..observer import ObserverConfig, build_observer
 from ..observer.trace import EstimateTrace
+from ..params import ParameterError
 from ..simulation import SENSOR_KEYS
 
-__all__ = ["EstimatorWrapper", "ESTIMATE_OBSERVATION_NAMES"]
+__all__ = ["EstimatorWrapper", "ESTIMATE_OBSERVATION_NAMES", "IMU_ESTIMATE_OBSERVATION_NAMES", "WRAPPER_SENSORS"]
 
 ESTIMATE_OBSERVATION_NAMES = ("e1_hat", "e1_dot_hat", "e2_hat", "e2_dot_hat", "alpha_f_hat", "alpha_r_hat")
+#: appended with ``sensors="imu"`` (no path states without a camera)
+IMU_ESTIMATE_OBSERVATION_NAMES = ("vy_hat", "yaw_rate_hat", "alpha_f_hat", "alpha_r_hat")
+#: measurement models the wrapper runs
+WRAPPER_SENSORS = ("camera", "imu", "both")
 _EST_HIGH = np.array([10.0, 20.0, np.pi, 10.0, 0.5, 0.5], dtype=np.float32)
+_IMU_EST_HIGH = np.array([20.0, 5.0, 0.5, 0.5], dtype=np.float32)
 
 
 class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -56,6 +66,10 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         Keep the per-tick estimates and ground truth of the episode for :meth:`metrics`.
     initial_weights : array, optional
         Weights to start every episode from (e.g. learned on a previous drive).
+    sensors : {"camera", "imu", "both"}, optional
+        Measurement model; default ``config.sensors`` when it names one, else ``camera``.
+        ``imu`` and ``both`` read the sensor log's ``ay`` and ``yaw_rate`` (one sample per
+        physics tick in every env: the IMU period is the physics step).
 
     Notes
     -----
@@ -68,7 +82,15 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     The camera's noise and latency come from the env's camera specification unless
     ``config`` gives them (the wrapper runs causally and cannot measure them first; the
-    offline :func:`~tire_learning_env.observer.estimate` measures them from the log).
+    offline :func:`~tire_learning_env.observer.estimate` measures them from the log). The
+    IMU noise is ``config.imu_noise``, else the core's assumption when nothing is known
+    (:data:`~tire_learning_env.observer.estimator.NOISE_DEFAULT`: 0.5 m/s^2, 0.005 rad/s).
+
+    With ``sensors="imu"`` the state is ``[vy, r]`` (``info["estimate"]["state"]`` has two
+    entries) and ``append_to_observation`` appends :data:`IMU_ESTIMATE_OBSERVATION_NAMES`.
+    With ``sensors="both"`` a step without IMU samples is corrected by the camera alone (and
+    the other way round); the fused design stays (its basis and gains are the fused ones, so
+    it is not the camera observer: ``tests/test_fusion.py``).
     """
 
     def __init__(
@@ -78,6 +100,7 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         append_to_observation: bool = False,
         keep_history: bool = True,
         initial_weights: NDArray | None = None,
+        sensors: str | None = None,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self,
@@ -85,6 +108,7 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             append_to_observation=append_to_observation,
             keep_history=keep_history,
             initial_weights=initial_weights,
+            sensors=sensors,
         )
         gym.Wrapper.__init__(self, env)
         inputs = getattr(env.unwrapped, "estimator_inputs", None)
@@ -98,9 +122,17 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 inner.info_logs = True
             inner = inner.env
         self.config = config or ObserverConfig()
+        if sensors is None:
+            sensors = self.config.sensors if self.config.sensors in WRAPPER_SENSORS else "camera"
+        if sensors not in WRAPPER_SENSORS:
+            raise ParameterError(f"sensors must be one of {WRAPPER_SENSORS}, got {sensors!r}")
+        self.sensors = sensors
+        uses_imu = sensors in ("imu", "both")
         self.observer = build_observer(
-            inputs["vehicle"], inputs["camera"], self.config, inputs["physics_dt"], initial_weights=initial_weights
-        )
+            inputs["vehicle"], inputs["camera"], self.config, inputs["physics_dt"], initial_weights=initial_weights,
+            sensors=sensors, imu_period=inputs["physics_dt"] if uses_imu else None,
+        )  # fmt: skip
+        self._est_high = _IMU_EST_HIGH if sensors == "imu" else _EST_HIGH
         self.append_to_observation = append_to_observation
         self.keep_history = keep_history
         if append_to_observation:
@@ -108,8 +140,8 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             if not isinstance(base, spaces.Box) or len(base.shape) != 1:
                 raise TypeError("append_to_observation needs a flat Box observation space")
             self.observation_space = spaces.Box(
-                np.concatenate([base.low, -_EST_HIGH]).astype(np.float32),
-                np.concatenate([base.high, _EST_HIGH]).astype(np.float32),
+                np.concatenate([base.low, -self._est_high]).astype(np.float32),
+                np.concatenate([base.high, self._est_high]).astype(np.float32),
                 dtype=np.float32,
             )
         self._traces: list[EstimateTrace] = []
@@ -154,7 +186,7 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if not self.append_to_observation:
             return obs
         est = np.concatenate([self._last["state"], self._last["slip"]]).astype(np.float32)
-        return np.concatenate([np.asarray(obs, dtype=np.float32), np.clip(est, -_EST_HIGH, _EST_HIGH)])
+        return np.concatenate([np.asarray(obs, dtype=np.float32), np.clip(est, -self._est_high, self._est_high)])
 
     def tire_curve(self, slip: NDArray, axle: str = "front") -> NDArray:
         """Learned total axle force [N] at ``slip`` [rad] (eq. 29)."""
@@ -180,9 +212,11 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if plant is None or not hasattr(plant, "true_axle_curve"):
             raise RuntimeError("the env's plant does not expose its true tire curve")
         veh = self.observer.vehicle
+        # IMU only: no path states, so the e1/e2 scores are NaN (slip, curve and stiffness are scored)
+        xi_hat = trace.xi if trace.has_pose else np.full((len(trace.t), 4), np.nan)
         return compute_metrics(
             t=trace.t,
-            xi_hat=trace.xi,
+            xi_hat=xi_hat,
             slip_hat=trace.slip,
             force_nonlinear_hat=trace.force_nonlinear,
             truth=truth,
