@@ -28,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(one row per log: log, status ok/failed/skipped, error, headline figures, runtime), DIR/summary.parquet, "
         "DIR/fleet.png and DIR/batch_results.jsonl (the resume state). A failing log is a 'failed' row, never the "
         "end of the batch. Re-running with the same --out skips the logs already done (status 'skipped'); every "
-        "finished row is on disk the moment it finishes. Needs the fleet extra: pip install "
+        "finished row is on disk the moment it finishes (after updating the package, start over with --overwrite). "
+        "Exit code 1 when a log failed. Needs the fleet extra: pip install "
         "'tire_learning_env[fleet]'. See docs/fleet.md.",
     )
     p.add_argument("logs", nargs="+", metavar="LOG", help="log files, folders (searched recursively) or glob patterns")
