@@ -31,6 +31,7 @@ from ..dynamics import PlantOutput
 from ..params import ParameterError, VehicleParams
 from ..roads import Road, make_road
 from . import _mb_kernels as K
+from . import _pac2002 as T
 from .params import HighOrderConfig, MultiBodyParams, Pac2002Tire, bmw_320i
 
 __all__ = [
@@ -103,10 +104,10 @@ def tire_vector(tire: Pac2002Tire, symmetric: bool = False) -> NDArray:
     ``symmetric`` zeroes ``p_hy1`` and ``p_vy1`` (see :class:`~.params.HighOrderConfig`).
     """
     vec = np.array([float(getattr(tire, f.name)) for f in fields(tire)])
-    assert len(vec) == K.N_TIRE
+    assert len(vec) == T.N_TIRE
     if symmetric:
-        vec[K.TY_PHY1] = 0.0
-        vec[K.TY_PVY1] = 0.0
+        vec[T.TY_PHY1] = 0.0
+        vec[T.TY_PVY1] = 0.0
     return vec
 
 
@@ -148,7 +149,7 @@ def tire_lateral_force(
     """
     ty = tire_vector(tire, symmetric)
     a = np.asarray(alpha, dtype=float)
-    out = np.array([K.tire_lateral_force(-float(v), kappa, camber, fz, ty) for v in a.ravel()])
+    out = np.array([T.tire_lateral_force(-float(v), kappa, camber, fz, ty) for v in a.ravel()])
     return out.reshape(a.shape)
 
 
