@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
@@ -52,6 +52,17 @@ __all__ = ["TrafficEnv", "TRAFFIC_FEATURE_NAMES", "LANE_ACTIONS"]
 TRAFFIC_FEATURE_NAMES = ("present", "ds", "dl", "dv")
 #: Meaning of the discrete action when ``lane_change="action"`` (highway-env's lane ids).
 LANE_ACTIONS = ("keep", "lane_id_minus_1", "lane_id_plus_1")
+
+class LaneSwitch(NamedTuple):
+    """A switch of the target lane during a step (``info["lane_switches"]``)."""
+
+    row: int  # first log row relative to the new lane
+    kind: int  # SWITCH_JOIN (hand-over between road segments) or SWITCH_LANE_CHANGE
+    e1_jump: float  # [m]
+    e2_jump: float  # [rad]
+    kappa_before: float  # [1/m]
+    kappa_after: float  # [1/m]
+
 
 _TRAFFIC_HIGH = np.array([1.0, 200.0, 20.0, 50.0], dtype=np.float32)
 _TRAFFIC_LOW = np.array([0.0, -200.0, -20.0, -50.0], dtype=np.float32)
@@ -202,7 +213,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         self.lane_changes = 0
         self.crashed = False
         self.departed = False
-        self._switches: list[tuple] = []
+        self._switches: list[LaneSwitch] = []
         self._row = 0
         self._last_tick = None
         self._place_ego()
@@ -389,7 +400,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
             self.ego.target_lane_index = self.target_lane
         if kind == SWITCH_JOIN and self._corridor_origin != 0.0:
             self._corridor_origin += d_e1
-        self._switches.append((row, kind, d_e1, d_e2, k_old, k_new))
+        self._switches.append(LaneSwitch(row, kind, d_e1, d_e2, k_old, k_new))
         return d_e1
 
     def _shift_camera(self, d_e1: float, d_e2: float) -> None:
@@ -492,12 +503,12 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
     def _switch_info(self) -> dict[str, NDArray]:
         sw = self._switches
         return {
-            "row": np.array([w[0] for w in sw], dtype=np.int64),
-            "lane_change": np.array([w[1] == SWITCH_LANE_CHANGE for w in sw], dtype=bool),
-            "e1_jump": np.array([w[2] for w in sw], dtype=float),
-            "e2_jump": np.array([w[3] for w in sw], dtype=float),
-            "kappa_before": np.array([w[4] for w in sw], dtype=float),
-            "kappa_after": np.array([w[5] for w in sw], dtype=float),
+            "row": np.array([w.row for w in sw], dtype=np.int64),
+            "lane_change": np.array([w.kind == SWITCH_LANE_CHANGE for w in sw], dtype=bool),
+            "e1_jump": np.array([w.e1_jump for w in sw], dtype=float),
+            "e2_jump": np.array([w.e2_jump for w in sw], dtype=float),
+            "kappa_before": np.array([w.kappa_before for w in sw], dtype=float),
+            "kappa_after": np.array([w.kappa_after for w in sw], dtype=float),
         }
 
     # -- rendering ---------------------------------------------------------------------
