@@ -154,6 +154,11 @@ def test_batch_on_local_ray_with_broken_logs_and_resume(local_ray, fleet, tmp_pa
     table = pq.read_table(out / "summary.parquet").to_pydict()
     assert sorted(table["name"]) == sorted(rows)
     assert (out / "fleet.png").stat().st_size > 1000
+    with open(out / "vehicles.csv", newline="") as fh:
+        pooled = list(csv.DictReader(fh))
+    assert {(v["vehicle"], v["axle"]) for v in pooled} == {(".", "front"), (".", "rear"), ("car_b", "front"),
+                                                           ("car_b", "rear")}  # fmt: skip
+    assert rows["car_b__drive"]["vehicle"] == "car_b"
     assert "failed: broken" in capsys.readouterr().err
     first = {k: r["stiffness_front_N_per_rad"] for k, r in ok.items()}
 
@@ -303,3 +308,24 @@ def test_batch_discrepancy_rows(fleet, tmp_path):
     assert float(r["gap_ratio"]) == pytest.approx(report["gap_ratio"], rel=1e-5)
     assert [e.split("(")[0] for e in r["effects"].split("; ") if e] == [e["name"] for e in report["effects"]]
     assert json.loads((out / "batch.json").read_text())["args"] == ["--seed", "3"]  # --seed reaches the command
+
+
+def test_pooled_stiffness_per_vehicle():
+    """Inverse-variance pooling of a vehicle's identified logs; a log without a value is not pooled."""
+    from tire_learning_env.fleet.batch import pooled_by_vehicle, vehicle_ids
+
+    def row(vehicle, k, lo, hi, status="ok"):
+        return {"vehicle": vehicle, "status": status, "stiffness_front_N_per_rad": k,
+                "stiffness_front_lo_N_per_rad": lo, "stiffness_front_hi_N_per_rad": hi}  # fmt: skip
+
+    rows = [row("car_a", 100e3, 98e3, 102e3), row("car_a", 104e3, 100e3, 108e3), row("car_a", "", 90e3, 120e3),
+            row("car_a", 50e3, 40e3, 60e3, status="failed"), row("car_b", 90e3, 85e3, 95e3)]  # fmt: skip
+    front = {v["vehicle"]: v for v in pooled_by_vehicle(rows) if v["axle"] == "front"}
+    a = front["car_a"]
+    assert a["logs"] == 3 and a["identified_logs"] == 2  # the failed log is not a log of the estimate
+    assert a["stiffness_N_per_rad"] == pytest.approx((100e3 / 1e6 + 104e3 / 4e6) / (1 / 1e6 + 1 / 4e6))
+    assert a["hi_N_per_rad"] - a["lo_N_per_rad"] == pytest.approx(4 * 1e3 / np.sqrt(1.25))
+    assert (a["min_log_estimate_N_per_rad"], a["max_log_estimate_N_per_rad"]) == (100e3, 104e3)
+    assert front["car_b"]["stiffness_N_per_rad"] == 90e3
+    assert vehicle_ids([Path("f/car_a/1.csv"), Path("f/car_b/x/2.csv")]) == ["car_a", "car_b/x"]
+    assert vehicle_ids([Path("f/1.csv"), Path("f/2.csv")]) == ["1", "2"]  # one folder: a log is a vehicle

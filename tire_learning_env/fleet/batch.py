@@ -5,8 +5,10 @@ Output folder ``DIR``::
     DIR/<name>/              the command's usual outputs for one log (written atomically by it)
     DIR/summary.csv          one row per log: log, status (ok/failed/skipped), error, headline figures
     DIR/summary.parquet      the same table (written at the end)
-    DIR/fleet.png            stiffness per vehicle with 2-sigma bands (estimate) or the gap ratio
-                             per log by verdict (discrepancy)
+    DIR/vehicles.csv         estimate: per vehicle (the logs' folder) and axle, the pooled stiffness
+                             and its 2-sigma band (:func:`pooled_by_vehicle`)
+    DIR/fleet.png            stiffness per log and per vehicle with 2-sigma bands (estimate) or the
+                             gap ratio per log by verdict (discrepancy)
     DIR/batch_results.jsonl  the runner's store: one record per finished log (the resume state)
     DIR/batch.json           the batch's command and options (a re-run must match them)
 
@@ -44,15 +46,17 @@ from ..io import (MANIFEST_NAME, LogFormatError, OutputPathError, atomic_write_j
 from ..params import ParameterError
 from .runner import ItemResult, ResultStore, run_items
 
-__all__ = ["LOG_SUFFIXES", "COMMANDS", "SUMMARY_COLUMNS", "expand_logs", "output_names", "LogJob", "run_log",
-           "run_batch", "BatchResult"]  # fmt: skip
+__all__ = ["LOG_SUFFIXES", "COMMANDS", "SUMMARY_COLUMNS", "expand_logs", "output_names", "vehicle_ids", "LogJob",
+           "run_log", "run_batch", "BatchResult", "pooled_by_vehicle"]  # fmt: skip
 
 LOG_SUFFIXES = (".csv", ".mf4", ".mdf", ".parquet", ".pq", ".mcap")  # and ROS 2 bag folders
 COMMANDS = ("estimate", "discrepancy")
 STORE_NAME = "batch_results.jsonl"
 MARKER_NAME = "batch.json"
 
-COMMON_COLUMNS = ["log", "name", "status", "error", "kind", "rows", "runtime_s", "worker"]
+COMMON_COLUMNS = ["log", "name", "vehicle", "status", "error", "kind", "rows", "runtime_s", "worker"]
+VEHICLE_COLUMNS = ["vehicle", "axle", "logs", "identified_logs", "stiffness_N_per_rad", "lo_N_per_rad", "hi_N_per_rad",
+                   "min_log_estimate_N_per_rad", "max_log_estimate_N_per_rad"]  # fmt: skip
 SUMMARY_COLUMNS = {
     "estimate": COMMON_COLUMNS + [
         "sensors", "verdict", "stiffness_front_N_per_rad", "stiffness_front_lo_N_per_rad", "stiffness_front_hi_N_per_rad",
@@ -284,9 +288,19 @@ class BatchResult:
     results: list[ItemResult] = field(default_factory=list)
 
 
-def _row(rec: ItemResult, log: Path, name: str, command: str) -> dict:
+def vehicle_ids(logs: Sequence[Path]) -> list[str]:
+    """The vehicle of each log: its folder (relative to the logs' common folder) when the logs
+    span several folders (one folder per vehicle), else the log's own stem (one log, one vehicle)."""
+    parents = [Path(os.path.abspath(p)).parent for p in logs]
+    if len(set(parents)) < 2:
+        return [Path(p).stem for p in logs]
+    common = Path(os.path.commonpath([str(q) for q in parents]))
+    return [q.relative_to(common).as_posix() if q != common else "." for q in parents]
+
+
+def _row(rec: ItemResult, log: Path, name: str, command: str, vehicle: str = "") -> dict:
     row: dict[str, Any] = {c: "" for c in SUMMARY_COLUMNS[command]}
-    row.update(log=str(log), name=name, status=rec.status, error=rec.error, worker=rec.worker,
+    row.update(log=str(log), name=name, vehicle=vehicle, status=rec.status, error=rec.error, worker=rec.worker,
                runtime_s=rec.runtime_s)  # fmt: skip
     if isinstance(rec.result, dict):
         for k, v in rec.result.items():
@@ -404,6 +418,7 @@ def run_batch(
         raise ParameterError(f"--command must be one of {COMMANDS}, got {command!r}")
     paths = expand_logs(logs)
     names = output_names(paths)
+    vehicles = vehicle_ids(paths)
     out = Path(out)
     args = tuple(args)
     _validate_args(command, args)
@@ -434,12 +449,12 @@ def run_batch(
         old = stored.get(n)
         if old is not None and old.status in ("ok", "skipped") and old.fingerprint == fp:
             old.status = "skipped"
-            done_before.append(_row(old, p, n, command))
+            done_before.append(_row(old, p, n, command, vehicles[index[n]]))
     summary = _SummaryCSV(out / "summary.csv", columns, done_before)
 
     def on_result(rec: ItemResult) -> None:
         if rec.status != "skipped":  # skipped rows are already in the file
-            summary.add(_row(rec, paths[index[rec.key]], rec.key, command))
+            summary.add(_row(rec, paths[index[rec.key]], rec.key, command, vehicles[index[rec.key]]))
 
     try:
         results = run_items(run_log, jobs, keys=names, fingerprints=prints, store=out / STORE_NAME, workers=workers,
@@ -447,7 +462,7 @@ def run_batch(
                             on_result=on_result)  # fmt: skip
     finally:
         summary.close()
-    rows = [_row(r, paths[index[r.key]], r.key, command) for r in results]
+    rows = [_row(r, paths[index[r.key]], r.key, command, vehicles[index[r.key]]) for r in results]
     for r, row in zip(results, rows):
         if r.status != "failed" and not row.get("kind"):
             row.update(_log_facts(paths[index[r.key]], out / r.key))
@@ -515,10 +530,46 @@ def _write_summaries(out: Path, rows: list[dict], columns: list[str], command: s
         tmp = out / ".summary.parquet.tmp"
         pq.write_table(pa.table(table), str(tmp))
         os.replace(tmp, out / "summary.parquet")
-    _fleet_figure(out / "fleet.png", rows, command)
+    vehicles = pooled_by_vehicle(rows) if command == "estimate" else []
+    if command == "estimate":
+        buf = _io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(VEHICLE_COLUMNS)
+        for v in vehicles:
+            w.writerow([_cell(v.get(c, "")) for c in VEHICLE_COLUMNS])
+        atomic_write_text(out / "vehicles.csv", buf.getvalue())
+    _fleet_figure(out / "fleet.png", rows, command, vehicles)
 
 
-def _fleet_figure(path: Path, rows: list[dict], command: str) -> None:
+def pooled_by_vehicle(rows: list[dict]) -> list[dict]:
+    """Per vehicle and axle: the inverse-variance weighted mean of its logs' identified
+    stiffness [N/rad] and its 2-sigma band (sigma from each log's band, (hi - lo) / 4). This
+    assumes one true stiffness per vehicle and axle across its drives (same tires, same road
+    conditions); ``min_log_estimate``/``max_log_estimate`` show how far the drives disagree."""
+    import numpy as np
+
+    out = []
+    order = list(dict.fromkeys(r.get("vehicle", "") for r in rows))
+    for vehicle in order:
+        mine = [r for r in rows if r.get("vehicle", "") == vehicle and r["status"] in ("ok", "skipped")]
+        for axle in ("front", "rear"):
+            k = np.array([_num(r.get(f"stiffness_{axle}_N_per_rad")) for r in mine])
+            lo = np.array([_num(r.get(f"stiffness_{axle}_lo_N_per_rad")) for r in mine])
+            hi = np.array([_num(r.get(f"stiffness_{axle}_hi_N_per_rad")) for r in mine])
+            ok = np.isfinite(k) & np.isfinite(lo) & np.isfinite(hi) & (hi > lo)
+            row = {"vehicle": vehicle, "axle": axle, "logs": len(mine), "identified_logs": int(ok.sum())}
+            if ok.any():
+                sd = (hi[ok] - lo[ok]) / 4.0
+                wgt = 1.0 / sd**2
+                mean = float(np.sum(wgt * k[ok]) / np.sum(wgt))
+                sd_pooled = float(1.0 / np.sqrt(np.sum(wgt)))
+                row.update(stiffness_N_per_rad=mean, lo_N_per_rad=mean - 2 * sd_pooled, hi_N_per_rad=mean + 2 * sd_pooled,
+                           min_log_estimate_N_per_rad=float(k[ok].min()), max_log_estimate_N_per_rad=float(k[ok].max()))
+            out.append(row)
+    return out
+
+
+def _fleet_figure(path: Path, rows: list[dict], command: str, vehicles: list[dict] | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -526,11 +577,26 @@ def _fleet_figure(path: Path, rows: list[dict], command: str) -> None:
     import numpy as np
 
     done = [r for r in rows if r["status"] in ("ok", "skipped")]
+    order = list(dict.fromkeys(r.get("vehicle", "") for r in done))
+    done.sort(key=lambda r: order.index(r.get("vehicle", "")))  # the logs of a vehicle side by side
+    grouped = len(order) < len(done)  # some vehicle has several logs
+    x = np.arange(len(done), dtype=float)
+    if grouped:  # a gap between vehicles
+        x = x + np.array([order.index(r.get("vehicle", "")) for r in done]) * 0.8
     n = max(len(done), 1)
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.45 * n + 2), 4.2))
-    labels = [r["name"] for r in done]
-    x = np.arange(len(done))
+    fig, ax = plt.subplots(figsize=(max(7.0, 0.45 * n + 2), 5.2))
+    labels = [f"{r.get('vehicle', '')}: {r['name']}" if grouped else r["name"] for r in done]
     if command == "estimate":
+        if grouped:
+            for v in vehicles or []:
+                xs = [xi for xi, r in zip(x, done) if r.get("vehicle", "") == v["vehicle"]]
+                if not xs or not math.isfinite(_num(v.get("stiffness_N_per_rad"))):
+                    continue
+                colour = "tab:blue" if v["axle"] == "front" else "tab:orange"
+                y, lo, hi = (_num(v[c]) / 1e3 for c in ("stiffness_N_per_rad", "lo_N_per_rad", "hi_N_per_rad"))
+                ax.fill_between([min(xs) - 0.35, max(xs) + 0.35], lo, hi, color=colour, alpha=0.15, linewidth=0)
+                ax.plot([min(xs) - 0.35, max(xs) + 0.35], [y, y], color=colour, linewidth=1.5)
+            ax.plot([], [], color="grey", linewidth=1.5, label="per vehicle: pooled estimate and 2 sigma band (shaded)")
         for k, (axle, colour, dx) in enumerate((("front", "tab:blue", -0.12), ("rear", "tab:orange", 0.12))):
             y = np.array([_num(r.get(f"stiffness_{axle}_N_per_rad")) for r in done]) / 1e3
             lo = np.array([_num(r.get(f"stiffness_{axle}_lo_N_per_rad")) for r in done]) / 1e3
@@ -546,7 +612,8 @@ def _fleet_figure(path: Path, rows: list[dict], command: str) -> None:
                             ecolor=colour, capsize=3, alpha=0.45, linestyle="--",
                             label=f"{axle}: not identified (band only)")  # fmt: skip
         ax.set_ylabel("cornering stiffness per tire [kN/rad]")
-        ax.set_title(f"fleet: stiffness per log ({len(done)} of {len(rows)} logs estimated)")
+        what = f"{len(order)} vehicles, " if grouped else ""
+        ax.set_title(f"fleet: stiffness per log and vehicle ({what}{len(done)} of {len(rows)} logs estimated)")
     else:
         colours = {"found": "tab:red", "none": "tab:green", "unexplained": "tab:purple"}
         for verdict, colour in colours.items():
@@ -556,8 +623,9 @@ def _fleet_figure(path: Path, rows: list[dict], command: str) -> None:
         ax.set_ylabel("gap ratio: model-log gap before / after the named effects [-]")
         ax.set_title(f"fleet: model discrepancy per log ({len(done)} of {len(rows)} logs analysed)")
     ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=7)
+    ax.title.set_fontsize(10)
     if done:
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.3), ncol=2, frameon=False)
     ax.grid(alpha=0.3)
     fig.tight_layout()
     tmp = path.with_name(f".{path.name}.tmp.png")
