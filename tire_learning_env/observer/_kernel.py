@@ -62,8 +62,8 @@ HEALTH_NAMES = ("ok", "settling", "no_data", "inconsistent", "diverged", "recove
 MODE_CAUSAL, MODE_FIXED = 0, 1
 # health state vector layout
 (HS_CODE, HS_LAST_MEAS, HS_TRIP_T, HS_SUM, HS_DOF, HS_COUNT, HS_HEAD, HS_LAST_CKPT, HS_N_CKPT,
- HS_CKPT_HEAD, HS_TRIPS, HS_STARTED, HS_T0) = range(13)  # fmt: skip
-N_HS = 13
+ HS_CKPT_HEAD, HS_TRIPS, HS_STARTED, HS_T0, HS_PREV_T, HS_PREV_KAPPA, HS_KAPPA_RATE) = range(16)  # fmt: skip
+N_HS = 16  # the last three: the previous row's time and curvature, and the curvature rate (not health)
 # history meta: number of rows stored, head
 HM_COUNT, HM_HEAD = 0, 1
 V_FLOOR = 3.0  # [m/s]: speed floor of the slip angles (singular at standstill)
@@ -371,12 +371,12 @@ def make_work(nx: int, nw: int, nb: int = 64) -> _Work:
 
 
 @njit(cache=True)
-def predict(st, dt, delta, vx0, ax, kappa, M, S, wk):
+def predict(st, dt, delta, vx0, ax, kappa, kdot, M, S, wk):
     """Advance ``x``, ``Upsilon``, ``Sigma`` (and the weight random walk) by ``dt`` [s] with the
-    inputs held (speed ramps with ``ax``)."""
+    steering held, the speed ramping with ``ax`` and the path curvature with ``kdot`` [1/(m s)]."""
     if dt <= 0.0:
         return
-    _predict_arrays(dt, delta, vx0, ax, kappa, st.x, st.w, st.ups, st.sig, M.veh, M.nx, M.lam, M.gamma, M.ub, M.nub,
+    _predict_arrays(dt, delta, vx0, ax, kappa, kdot, st.x, st.w, st.ups, st.sig, M.veh, M.nx, M.lam, M.gamma, M.ub, M.nub,
                     M.ilo, M.ihi, M.off, M.q_force, M.h_max, wk.phi, wk.dphi, wk.spm, wk.spp, wk.ht, wk.k1, wk.k2,
                     wk.k3, wk.k4, wk.y, wk.J, wk.Phi, wk.Gm, wk.T1, wk.U)  # fmt: skip
     if S.mode == MODE_CAUSAL and S.adapt and S.q_w > 0.0:
@@ -385,7 +385,7 @@ def predict(st, dt, delta, vx0, ax, kappa, M, S, wk):
 
 
 @njit(cache=True)
-def _predict_arrays(dt, delta, vx0, ax, kappa, x, w, ups, sig, veh, nx, lam, gam, ub, nub, ilo, ihi, off, q_force,
+def _predict_arrays(dt, delta, vx0, ax, kappa0, kdot, x, w, ups, sig, veh, nx, lam, gam, ub, nub, ilo, ihi, off, q_force,
                     h_max, phi, dphi, spm, spp, ht, k1, k2, k3, k4, y, J, Phi, Gm, T1, U):  # fmt: skip
     """:func:`predict` on plain arrays (the hot path: no tuple access inside the loops)."""
     nw = w.shape[0]
@@ -400,6 +400,9 @@ def _predict_arrays(dt, delta, vx0, ax, kappa, x, w, ups, sig, veh, nx, lam, gam
         v0 = vx0 + ax * s * h
         vm = v0 + 0.5 * h * ax
         v1 = v0 + h * ax
+        kappa = kappa0 + kdot * s * h
+        kappa_m = kappa + 0.5 * h * kdot
+        kappa_1 = kappa + h * kdot
         kf, kr = _rhs_arrays(x, delta, cd, v0, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp,
                              ht, k1, True)  # fmt: skip
         # linearised transition over the sub-step: Phi = I + hJ + (hJ)^2/2, Gm = h (I + hJ/2)
@@ -465,15 +468,15 @@ def _predict_arrays(dt, delta, vx0, ax, kappa, x, w, ups, sig, veh, nx, lam, gam
         # RK4 of the state (the speed ramps within the sub-step)
         for i in range(nx):
             y[i] = x[i] + 0.5 * h * k1[i]
-        _rhs_arrays(y, delta, cd, vm, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k2,
+        _rhs_arrays(y, delta, cd, vm, kappa_m, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k2,
                     False)  # fmt: skip
         for i in range(nx):
             y[i] = x[i] + 0.5 * h * k2[i]
-        _rhs_arrays(y, delta, cd, vm, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k3,
+        _rhs_arrays(y, delta, cd, vm, kappa_m, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k3,
                     False)  # fmt: skip
         for i in range(nx):
             y[i] = x[i] + h * k3[i]
-        _rhs_arrays(y, delta, cd, v1, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k4,
+        _rhs_arrays(y, delta, cd, v1, kappa_1, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k4,
                     False)  # fmt: skip
         for i in range(nx):
             x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
@@ -851,7 +854,7 @@ def _store_state(st, slot):
 
 
 @njit(cache=True)
-def _push_history(st, t, delta, vx, ax, kappa, zk):
+def _push_history(st, t, delta, vx, ax, kappa, kdot, zk):
     """Store the prior and the inputs of the row being processed; advance the counter."""
     H = st.hist_t.shape[0]
     slot = int(st.hist_meta[HM_HEAD])
@@ -863,6 +866,7 @@ def _push_history(st, t, delta, vx, ax, kappa, zk):
     st.hist_u[i, 3] = kappa
     st.hist_u[i, 4] = zk[CH_AY]
     st.hist_u[i, 5] = zk[CH_R]
+    st.hist_u[i, 6] = kdot
     _store_state(st, slot)
     st.hist_meta[HM_HEAD] = slot + 1
     st.hist_meta[HM_COUNT] = min(st.hist_meta[HM_COUNT] + 1, H)
@@ -906,16 +910,16 @@ def delayed_camera(st, zk, M, G, S, adapt, accumulate, acc, score, k, wk, zrow):
         j -= 1
     sj = j % H
     _restore_state(st, j)
-    d, v, a, kap = st.hist_u[sj, 0], st.hist_u[sj, 1], st.hist_u[sj, 2], st.hist_u[sj, 3]
+    d, v, a, kap, kd = st.hist_u[sj, 0], st.hist_u[sj, 1], st.hist_u[sj, 2], st.hist_u[sj, 3], st.hist_u[sj, 6]
     if S.use_imu:
         _stored_imu(st, j, zrow)
         update(GROUP_IMU, st, d, v, zrow, M, G, S, False, False, acc, score, k, wk)
     dtp = max(tau - st.hist_t[sj], 0.0)
-    predict(st, dtp, d, v, a, kap, M, S, wk)
+    predict(st, dtp, d, v, a, kap, kd, M, S, wk)
     res = update(GROUP_CAMERA, st, d, v + a * dtp, zk, M, G, S, adapt, accumulate, acc, score, k, wk)
     if j == now:
         return res
-    predict(st, st.hist_t[(j + 1) % H] - st.hist_t[sj] - dtp, d, v + a * dtp, a, kap, M, S, wk)
+    predict(st, st.hist_t[(j + 1) % H] - st.hist_t[sj] - dtp, d, v + a * dtp, a, kap + kd * dtp, kd, M, S, wk)
     for i in range(j + 1, now):
         si = i % H
         _store_state(st, i)
@@ -923,7 +927,7 @@ def delayed_camera(st, zk, M, G, S, adapt, accumulate, acc, score, k, wk, zrow):
             _stored_imu(st, i, zrow)
             update(GROUP_IMU, st, st.hist_u[si, 0], st.hist_u[si, 1], zrow, M, G, S, False, False, acc, score, k, wk)
         predict(st, st.hist_t[(i + 1) % H] - st.hist_t[si], st.hist_u[si, 0], st.hist_u[si, 1], st.hist_u[si, 2],
-                st.hist_u[si, 3], M, S, wk)  # fmt: skip
+                st.hist_u[si, 3], st.hist_u[si, 6], M, S, wk)  # fmt: skip
     _store_state(st, now)
     return res
 
@@ -980,8 +984,17 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
         if S.record:
             for c in range(N_CHANNELS):
                 out.nu[k, c] = np.nan
+        # the path curvature's rate over the coming interval: the backward difference of the last two
+        # rows (causal, and the same whether the rows come in one call or several)
+        kd = 0.0
+        if st.hs[HS_PREV_T] == st.hs[HS_PREV_T] and tk > st.hs[HS_PREV_T] and kappa[k] == kappa[k] \
+                and st.hs[HS_PREV_KAPPA] == st.hs[HS_PREV_KAPPA]:
+            kd = (kappa[k] - st.hs[HS_PREV_KAPPA]) / (tk - st.hs[HS_PREV_T])
+        st.hs[HS_PREV_T] = tk
+        st.hs[HS_PREV_KAPPA] = kappa[k]
+        st.hs[HS_KAPPA_RATE] = kd
         if delayed and not shift:
-            _push_history(st, tk, delta[k], vx[k], ax[k], kappa[k], zk)
+            _push_history(st, tk, delta[k], vx[k], ax[k], kappa[k], kd, zk)
         accumulate = S.mode == MODE_FIXED and tk >= S.accumulate_from
         nis_row = 0.0
         dof_row = 0
@@ -1049,7 +1062,8 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
                     if dtp < done:
                         dtp = done
                     if dtp > done:
-                        predict(st, dtp - done, delta[k], vx[k] + ax[k] * done, ax[k], kappa[k], M, S, wk)
+                        predict(st, dtp - done, delta[k], vx[k] + ax[k] * done, ax[k], kappa[k] + kd * done, kd, M, S,
+                                wk)  # fmt: skip
                     done = dtp
                     for c in range(N_CHANNELS):
                         zrow[c] = z[nf, c]
@@ -1060,9 +1074,10 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
                         _health_push(st, t[nf], nis, dof, S, M)
                     nf = _next_frame(z, nf + 1)
                 if k < n - 1 or predict_last:
-                    predict(st, dt_row - done, delta[k], vx[k] + ax[k] * done, ax[k], kappa[k], M, S, wk)
+                    predict(st, dt_row - done, delta[k], vx[k] + ax[k] * done, ax[k], kappa[k] + kd * done, kd, M, S,
+                            wk)  # fmt: skip
             else:
-                predict(st, dt_row, delta[k], vx[k], ax[k], kappa[k], M, S, wk)
+                predict(st, dt_row, delta[k], vx[k], ax[k], kappa[k], kd, M, S, wk)
     if S.mode == MODE_FIXED:  # the fit's normal matrix is accumulated in its upper triangle
         for a in range(nw):
             for b in range(a + 1, nw):

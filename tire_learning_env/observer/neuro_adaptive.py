@@ -357,11 +357,12 @@ class NeuroAdaptiveObserver:
         hlen = int(math.ceil(self.latency / max(self.dt, 1e-4))) + 3 if self.latency > 0 else 1
         hs = np.zeros(K.N_HS)
         hs[K.HS_CODE] = K.HEALTH_SETTLING
+        hs[K.HS_PREV_T] = np.nan  # no previous row: the first interval holds its curvature
         self._state = K.State(
             x, np.clip(w, lo, hi).astype(float), np.zeros((nx, nw)), self.initial_state_covariance(),
             np.ascontiguousarray(self.prior_covariance()), hs, np.zeros((min(W, 4000), 2)), np.zeros(8), np.zeros((8, nw)),
             np.zeros((8, nw, nw)), np.zeros(hlen), np.zeros((hlen, nx)), np.zeros((hlen, nx, nw)), np.zeros((hlen, nx, nx)),
-            np.zeros((hlen, 6)), np.zeros(2, dtype=np.int64),
+            np.zeros((hlen, 7)), np.zeros(2, dtype=np.int64),
         )  # fmt: skip
         self._t0: float | None = None
         self._block: dict | None = None  # the "block" law's running fit (see _run_blocks)
@@ -546,7 +547,8 @@ class NeuroAdaptiveObserver:
             pieces.append(tr)
             if not last:  # to the next row, as run() would have predicted inside one call
                 self.predict(float(t[j] - t[j - 1]), float(rows["delta"][j - 1]), float(rows["vx"][j - 1]),
-                             float(rows["kappa"][j - 1]), float(rows["ax"][j - 1]))  # fmt: skip
+                             float(rows["kappa"][j - 1]), float(rows["ax"][j - 1]),
+                             float(self._state.hs[K.HS_KAPPA_RATE]))  # fmt: skip
                 self.t = float(t[j])
             k = j
         if len(pieces) == 1:
@@ -560,14 +562,15 @@ class NeuroAdaptiveObserver:
         return EstimateTrace(**arrays, state_names=first.state_names, meta=dict(first.meta))
 
     def predict(self, dt: float | None = None, delta: float = 0.0, vx: float | None = None, kappa: float = 0.0,
-                ax: float = 0.0) -> "NeuroAdaptiveObserver":  # fmt: skip
-        """Advance ``dt`` [s] (default ``physics_dt``) with the inputs held: steering [rad],
-        speed [m/s], path curvature [1/m], longitudinal acceleration [m/s^2]."""
+                ax: float = 0.0, kappa_rate: float = 0.0) -> "NeuroAdaptiveObserver":  # fmt: skip
+        """Advance ``dt`` [s] (default ``physics_dt``) with the steering [rad] held, the speed [m/s]
+        ramping with the longitudinal acceleration ``ax`` [m/s^2] and the path curvature [1/m]
+        with ``kappa_rate`` [1/(m s)] (:meth:`run` uses the backward difference of its rows)."""
         dt = self.dt if dt is None else float(dt)
         vx = self.vehicle.vx if vx is None else float(vx)
         S = self._settings(K.MODE_CAUSAL, self._t0 or self.t)
         wk = K.make_work(self.model.nx, self.n_weights, self._bounds[0].shape[1])
-        K.predict(self._state, dt, float(delta), vx, float(ax), float(kappa), self._model_tuple, S, wk)
+        K.predict(self._state, dt, float(delta), vx, float(ax), float(kappa), float(kappa_rate), self._model_tuple, S, wk)
         self.t += dt
         return self
 
