@@ -336,7 +336,7 @@ def window_residuals(
     - 0: ``n_iter`` steps, Jacobian at the guess (``1 + 3 + n_iter`` simulations);
     - 1: ``n_iter`` steps with the given ``jac`` (``1 + n_iter`` simulations), a
       fixed-Jacobian Gauss-Newton (the score statistic's secants);
-    - 2: converge: fresh Jacobian on the first two steps, then fixed, at most ``n_iter``
+    - 2: converge: fresh Jacobian on the first two steps and while steps are large, at most ``n_iter``
       steps, stop when every step component is below ``tol``.
 
     Fills ``resid`` (M,), the fitted initial states ``x0_out`` (W, 4) and the weighted

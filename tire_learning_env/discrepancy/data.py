@@ -120,6 +120,21 @@ class ModelData:
         return np.repeat(np.arange(self.n_windows), np.diff(self.meas_ptr))
 
 
+def window_subset(data: ModelData, windows: NDArray) -> ModelData:
+    """The same log restricted to some of its windows (rows shared, measurements of those windows only)."""
+    from dataclasses import replace
+
+    windows = np.asarray(windows, dtype=np.int64)
+    idx = np.concatenate([np.arange(data.meas_ptr[w], data.meas_ptr[w + 1]) for w in windows])
+    ptr = np.concatenate([[0], np.cumsum([data.meas_ptr[w + 1] - data.meas_ptr[w] for w in windows])])
+    return replace(
+        data, meas_row=data.meas_row[idx], meas_chan=data.meas_chan[idx], meas_val=data.meas_val[idx],
+        meas_w=data.meas_w[idx], win_sim=data.win_sim[windows], win_meas=data.win_meas[windows],
+        win_end=data.win_end[windows], meas_ptr=ptr.astype(np.int64), x0_guess=data.x0_guess[windows].copy(),
+        notes=list(data.notes), ay_guess=None if data.ay_guess is None else data.ay_guess[windows],
+    )  # fmt: skip
+
+
 def noise_std(y: NDArray) -> float:
     """Standard deviation of white noise on a smooth signal sampled at ``y`` (NaN-free).
 

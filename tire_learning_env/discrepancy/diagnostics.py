@@ -148,7 +148,11 @@ def _window_projectors(data: ModelData, jac: NDArray) -> list[NDArray]:
 
 
 def _portmanteau(data: ModelData, resid: NDArray, lags: dict[int, int]) -> NDArray:
-    """``n sum_l rho_l^2`` per camera channel (pairs within windows only); resid may be (M,) or (M, D)."""
+    """``n sum_l rho_l^2`` per primary channel (pairs within windows only); resid may be (M,) or (M, D).
+
+    The lag products are summed over windows by FFT (each window's segment zero-padded, so no pair
+    crosses a window boundary): the same sums as a direct loop over lags, in ``O(n log n)``.
+    """
     r2 = resid if resid.ndim == 2 else resid[:, None]
     wid = data.window_of_measurement()
     out = np.zeros((len(lags), r2.shape[1]))
@@ -158,11 +162,20 @@ def _portmanteau(data: ModelData, resid: NDArray, lags: dict[int, int]) -> NDArr
         x = x - x.mean(axis=0)
         w = wid[idx]
         denom = np.sum(x * x, axis=0)
+        # segments per window: position of each sample within its window's run
+        starts = np.flatnonzero(np.concatenate([[True], w[1:] != w[:-1]]))
+        lengths = np.diff(np.concatenate([starts, [len(w)]]))
+        seg = np.repeat(np.arange(len(starts)), lengths)
+        pos = np.arange(len(w)) - np.repeat(starts, lengths)
+        nfft = 1 << int(math.ceil(math.log2(max(int(lengths.max()) + n_lag + 1, 2))))
         q = np.zeros(r2.shape[1])
-        for lag in range(1, n_lag + 1):
-            same = w[lag:] == w[:-lag]
-            num = np.sum(x[lag:][same] * x[:-lag][same], axis=0)
-            q += (num / denom) ** 2
+        for d0 in range(0, r2.shape[1], 8):
+            d1 = min(r2.shape[1], d0 + 8)
+            pad = np.zeros((len(starts), nfft, d1 - d0))
+            pad[seg, pos] = x[:, d0:d1]
+            f = np.fft.rfft(pad, axis=1)
+            acf = np.fft.irfft((f * np.conj(f)).real, n=nfft, axis=1)[:, 1 : n_lag + 1].sum(axis=0)  # (L, D)
+            q[d0:d1] = np.sum((acf / denom[d0:d1]) ** 2, axis=0)
         out[i] = len(idx) * q
     return out.sum(axis=0)
 

@@ -402,6 +402,11 @@ def forward_selection(
     candidate was never more than about twice its score in our tests, so a candidate 20x
     below the best cannot win). Unfitted candidates are reported with their score.
 
+    Long logs (more than :data:`FIT_WINDOWS` windows): every candidate is fitted on an evenly spread
+    subset of that many windows and its likelihood ratio evaluated on the whole log at the fitted
+    parameters (a lower bound of the whole-log ratio: no false alarm from the subset); the accepted
+    effects are refitted jointly on the whole log at the end.
+
     ``correct_correlation``: every likelihood-ratio statistic is divided by the variance
     inflation of the residual *with* the candidate (:func:`long_run_variance`; 1 for a
     white residual), so a real log's correlated residual does not make every small
@@ -420,6 +425,19 @@ def forward_selection(
     """
     n = model.data.n_measurements
     nominal = model.nominal_start() if robust_states else model.converged()
+    sub = None if robust_states else _fit_subset(model)
+
+    def fit_(effects, theta, reference=None, x0_guess=None):
+        """fit_effects on the whole log, or (long logs) on a subset of its windows with the result evaluated
+        on the whole log: every decision uses all the data, at parameters fitted on part of it."""
+        if sub is None:
+            return fit_effects(model, effects, theta, reference=reference, x0_guess=x0_guess, **fit_options)
+        sub_model, windows = sub
+        f = fit_effects(sub_model, effects, theta, **fit_options)
+        guess = (reference.x0 if reference is not None else x0_guess)
+        ev = model.converged(f.theta, guess)
+        return CandidateFit(f.effects, f.values, f.stderr, ev, f.nfev + 1, f.hessian, f.z)
+
     if progress:
         progress("nominal model")
     current = nominal
@@ -446,8 +464,13 @@ def forward_selection(
         level = alpha / len(remaining)
         cols: dict[str, NDArray] = {}
         scores = {}
+        # long logs: the screen on the fitting subset, scaled to the whole log's size
+        sub_current = sub[0].converged(current.theta) if sub is not None else None
         for c in remaining:
             store: list = []
+            if sub is not None:
+                scores[c.name] = score_statistic(sub[0], c, sub_current) * n / sub[0].data.n_measurements
+                continue
             scores[c.name] = score_statistic(
                 model, c, current, columns=store if signatures else None, converged=robust_states
             )
@@ -467,7 +490,7 @@ def forward_selection(
                 step.tried[cand.name] = {"score": scores[cand.name], "fitted": False}
                 continue
             step.tried[cand.name] = {}  # filled below (keeps the ranked order)
-            fit = fit_effects(model, [cand], current.theta, reference=current, **fit_options)
+            fit = fit_([cand], current.theta, reference=current)
             fits[cand.name] = fit
             if progress:
                 progress(cand.name)
@@ -509,7 +532,7 @@ def forward_selection(
             }
         accepted.append(fits[best].effects[0])
         # joint refit of every accepted effect
-        joint = fit_effects(model, accepted, fits[best].theta, x0_guess=fits[best].evaluation.x0, **fit_options)
+        joint = fit_(accepted, fits[best].theta, x0_guess=fits[best].evaluation.x0)
         if robust_states:
             joint.evaluation = model.best_of(joint.theta, [joint.evaluation.x0, fits[best].evaluation.x0])
         current = joint.evaluation
@@ -526,6 +549,7 @@ def forward_selection(
                     # second order): no refit needed to know the effect stays
                     continue
                 theta_wo = e.apply(current.theta, e.absent)
+                # on the whole log: a subset fit would overstate the loss of dropping the effect
                 without = fit_effects(model, others, theta_wo, x0_guess=current.x0, **fit_options)
                 if robust_states:
                     without.evaluation = model.best_of(without.theta, [without.evaluation.x0, current.x0])
@@ -538,5 +562,29 @@ def forward_selection(
                     values = {a.name: v for a, v in zip(without.effects, without.values)}
                     errors = {a.name: s for a, s in zip(without.effects, without.stderr)}
         steps.append(step)
+    if sub is not None and accepted:
+        # the reported parameters from all the data: a joint refit of the accepted effects on the whole log
+        final = fit_effects(model, accepted, current.theta, reference=current, **{**fit_options, "max_nfev": 8})
+        if final.chi2 <= current.chi2:
+            current = final.evaluation
+            values = {e.name: v for e, v in zip(final.effects, final.values)}
+            errors = {e.name: s for e, s in zip(final.effects, final.stderr)}
     final_list = [(e, values[e.name], errors[e.name]) for e in accepted]
-    return SelectionResult(nominal, current, final_list, steps, model.n_evaluations)
+    n_eval = model.n_evaluations + (sub[0].n_evaluations if sub is not None else 0)
+    return SelectionResult(nominal, current, final_list, steps, n_eval)
+
+
+#: logs with more windows than this fit candidates on an evenly spread subset of this many windows
+FIT_WINDOWS = 60
+
+
+def _fit_subset(model: ResidualModel):
+    """``(model on a subset of the windows, their indices)`` for a long log, else None."""
+    from .data import window_subset
+
+    d = model.data
+    if d.n_windows <= FIT_WINDOWS or getattr(model, "input_noise", None) is not None:
+        return None
+    windows = np.unique(np.linspace(0, d.n_windows - 1, FIT_WINDOWS).round().astype(np.int64))
+    sub = ResidualModel(window_subset(d, windows), model.vehicle, model.front_tire, model.rear_tire, model.config)
+    return sub, windows
