@@ -122,3 +122,22 @@ def test_end_of_step_truth_matches_the_last_logged_tick():
     # one tick after the last logged row, with the same held steering: nearly equal
     np.testing.assert_allclose(info["true_slip"], info["truth_log"]["true_slip"][-1], rtol=1e-3, atol=1e-6)
     np.testing.assert_allclose(info["true_force"], info["truth_log"]["true_force"][-1], rtol=1e-3, atol=1e-3)
+
+
+@pytest.mark.parametrize("env_id", ["TireLearning-Cornering-v0", "TireLearning-Highway-v0"])
+def test_set_plant_swaps_the_truth_vehicle_for_the_next_episode(env_id):
+    """``set_plant`` is how a wrapper (the excitation task's truth randomisation) changes the truth:
+    the env and its simulator step the new plant, and its ground truth reaches ``info``."""
+    from tire_learning_env.dynamics import BicyclePlant
+    from tire_learning_env.tires import axle_tires
+
+    env = gym.make(env_id, config={"vehicles_count": 0} if "Highway" in env_id else None).unwrapped
+    soft = env.vehicle.replace(Cf=0.5 * env.vehicle.Cf, Cr=0.5 * env.vehicle.Cr)
+    plant = BicyclePlant(env.vehicle, *axle_tires(soft, "linear"))
+    env.set_plant(plant)
+    assert env.plant is plant and getattr(getattr(env, "sim", env), "plant", plant) is plant
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.array([0.02], dtype=np.float32))
+    np.testing.assert_array_equal(info["true_state"], np.asarray(plant.state[:4]))
+    # the linear half-stiffness truth: force = 2 (C/2) alpha on the front axle
+    assert info["true_force"][0] == pytest.approx(soft.Cf * 2 * info["true_slip"][0], rel=1e-9)
