@@ -209,6 +209,15 @@ def test_batch_errors_are_one_line(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "a.csv"), "--out", str(tmp_path / "o"), "--args=--tire linear"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "not valid for estimate" in err and "--tire" in err
+    import socket
+
+    with socket.socket() as sock:  # a port nothing listens on
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    (tmp_path / "b.csv").write_text("t\n")
+    assert main(["batch", str(tmp_path / "b.csv"), "--out", str(tmp_path / "o2"), "--address", f"127.0.0.1:{port}"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"cannot reach the Ray cluster at 127.0.0.1:{port}" in err
 
 
 def test_expand_logs_and_names(tmp_path):

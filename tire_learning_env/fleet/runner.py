@@ -203,6 +203,20 @@ def _progress(total: int, desc: str, enabled: bool, initial: int = 0):
                 file=sys.stderr)  # fmt: skip
 
 
+def _probe(address: str, timeout: float = 5.0) -> None:
+    """Fail fast, naming the address, when nothing listens at ``HOST:PORT`` (``ray.init`` would
+    retry for minutes). ``auto`` and other forms are left to Ray."""
+    target = address.split("://", 1)[-1]
+    host, sep, port = target.rpartition(":")
+    if not sep or not port.isdigit() or address == "auto":
+        return
+    try:
+        socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise RunnerError(f"cannot reach the Ray cluster at {address}: {exc.strerror or exc} (is `ray start --head` "
+                          "running there, and is the port right?)") from None  # fmt: skip
+
+
 def _start_ray(workers: int | None, address: str | None, ray_init_kwargs: dict | None):
     try:
         import ray
@@ -213,6 +227,7 @@ def _start_ray(workers: int | None, address: str | None, ray_init_kwargs: dict |
     kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False,
                               "runtime_env": {"env_vars": dict(THREAD_ENV)}}  # fmt: skip
     if address:
+        _probe(address)
         kwargs["address"] = address
     else:
         kwargs["num_cpus"] = int(workers or os.cpu_count() or 1)
