@@ -222,12 +222,13 @@ def _start_ray(workers: int | None, address: str | None, ray_init_kwargs: dict |
         import ray
     except ImportError:
         raise RunnerError("the Ray engine needs Ray: pip install 'tire_learning_env[fleet]' (or engine='serial')") from None
-    if ray.is_initialized():
+    if address:
+        _probe(address)
+    if ray.is_initialized():  # a session of the caller (e.g. a test's, or a notebook's): used and left running
         return ray, False
     kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False,
                               "runtime_env": {"env_vars": dict(THREAD_ENV)}}  # fmt: skip
     if address:
-        _probe(address)
         kwargs["address"] = address
     else:
         kwargs["num_cpus"] = int(workers or os.cpu_count() or 1)
@@ -347,6 +348,7 @@ def run_items(
         if store is not None:
             store.append(rec)
 
+    ray_session = _start_ray(workers, address, ray_init_kwargs) if todo and engine == "ray" else None  # errors before the bar
     bar = _progress(n, desc, progress, initial=n - len(todo))
     try:
         if on_result is not None:
@@ -358,11 +360,13 @@ def run_items(
                 record(i, _call(fn, items[i]))
                 bar.update(1)
         elif todo:
-            _run_ray(fn, items, todo, record, bar, workers, address, max_retries, num_cpus_per_item, ray_init_kwargs)
+            _run_ray(ray_session, fn, items, todo, record, bar, workers, max_retries, num_cpus_per_item)
     finally:
         bar.close()
         if own_store:
             store.close()
+        if ray_session is not None and ray_session[1] and ray_session[0].is_initialized():
+            ray_session[0].shutdown()  # started here and not yet stopped (an error before the tasks ran)
     return [r for r in results if r is not None]
 
 
@@ -371,8 +375,8 @@ _LOST = ("WorkerCrashedError", "NodeDiedError", "OwnerDiedError", "ObjectLostErr
          "ActorDiedError", "RaySystemError", "LocalRayletDiedError")  # fmt: skip
 
 
-def _run_ray(fn, items, todo, record, bar, workers, address, max_retries, num_cpus_per_item, ray_init_kwargs) -> None:
-    ray, started = _start_ray(workers, address, ray_init_kwargs)
+def _run_ray(session, fn, items, todo, record, bar, workers, max_retries, num_cpus_per_item) -> None:
+    ray, started = session
     try:
         remote = ray.remote(_call).options(max_retries=max_retries, retry_exceptions=False, num_cpus=num_cpus_per_item)
         fn_ref = ray.put(fn)
