@@ -1041,6 +1041,22 @@ def run_long(minutes: float) -> dict:
 
 
 # --------------------------------------------------------------------------------------------
+def code_version() -> dict:
+    """The git commit the benchmark ran on and the package files that differed from it (``None`` outside git)."""
+    import subprocess
+
+    try:
+        def git(*a):
+            return subprocess.run(["git", *a], cwd=Path(__file__).resolve().parent, capture_output=True, text=True,
+                                  timeout=30).stdout  # fmt: skip
+
+        head = git("rev-parse", "HEAD").strip() or None
+        dirty = [ln[3:] for ln in git("status", "--porcelain", "--", "../tire_learning_env").splitlines() if ln.strip()]
+        return {"git_head": head, "uncommitted_package_files": dirty}
+    except Exception:  # noqa: BLE001
+        return {"git_head": None}
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=None, help="scenarios per family (default 5; --quick: 2)")
@@ -1084,6 +1100,7 @@ def main(argv: list[str] | None = None) -> dict:
         "stats_note": "stiffness error, curve NRMSE and slip RMSE pool both axles (one sample per axle); band coverage "
                       "= fraction of axles whose truth lies inside estimate +/- 2 std",
         "machine": {"python": sys.version.split()[0], "platform": platform.platform(), "cpu_count": os.cpu_count()},
+        "code": code_version(),
     }  # fmt: skip
     t_start = time.perf_counter()
     by_family: dict = {f: [] for f in families}
