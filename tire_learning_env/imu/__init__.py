@@ -9,7 +9,8 @@ package is the IMU *log layer*:
 - :mod:`.blend`: interacting-multiple-model weighting of the observer and the linear KF by
   their innovations (never worse than the KF where the prediction errors tell them apart).
 - :mod:`.scoring`: sideslip RMSE and measured tire curves from a reference sensor.
-- :mod:`.simulate`: simulated IMU drives (Pacejka truth, varying speed) for tests.
+- :mod:`.simulate`: simulated IMU drives (Pacejka truth, varying speed, white noise, band-limited
+  ``a_y`` vibration, sensor offsets) for tests and the generalisation benchmark's IMU families.
 - :mod:`.plots`: figures of the ``estimate`` command.
 
 The linear Kalman filter lives in :mod:`tire_learning_env.baselines.kalman` (re-exported here).
