@@ -126,6 +126,7 @@ class Settings(NamedTuple):
     record: bool  # store the per-row outputs (off: only the state and the accumulators are updated)
     shift_frames: bool  # fixed mode, camera only: delayed frames applied at their instant in one forward
     # sweep (the same corrections as the rewind-and-replay of the causal mode, without the replay)
+    steering_ramp: bool  # steering ramps linearly to the next row's (first-order hold) instead of being held
 
 
 class State(NamedTuple):
@@ -371,12 +372,13 @@ def make_work(nx: int, nw: int, nb: int = 64) -> _Work:
 
 
 @njit(cache=True)
-def predict(st, dt, delta, vx0, ax, kappa, kdot, M, S, wk):
+def predict(st, dt, delta, ddot, vx0, ax, kappa, kdot, M, S, wk):
     """Advance ``x``, ``Upsilon``, ``Sigma`` (and the weight random walk) by ``dt`` [s] with the
-    steering held, the speed ramping with ``ax`` and the path curvature with ``kdot`` [1/(m s)]."""
+    steering ramping with ``ddot`` [rad/s] (0: held), the speed with ``ax`` and the path
+    curvature with ``kdot`` [1/(m s)]."""
     if dt <= 0.0:
         return
-    _predict_arrays(dt, delta, vx0, ax, kappa, kdot, st.x, st.w, st.ups, st.sig, M.veh, M.nx, M.lam, M.gamma, M.ub, M.nub,
+    _predict_arrays(dt, delta, ddot, vx0, ax, kappa, kdot, st.x, st.w, st.ups, st.sig, M.veh, M.nx, M.lam, M.gamma, M.ub, M.nub,
                     M.ilo, M.ihi, M.off, M.q_force, M.h_max, wk.phi, wk.dphi, wk.spm, wk.spp, wk.ht, wk.k1, wk.k2,
                     wk.k3, wk.k4, wk.y, wk.J, wk.Phi, wk.Gm, wk.T1, wk.U)  # fmt: skip
     if S.mode == MODE_CAUSAL and S.adapt and S.q_w > 0.0:
@@ -385,7 +387,7 @@ def predict(st, dt, delta, vx0, ax, kappa, kdot, M, S, wk):
 
 
 @njit(cache=True)
-def _predict_arrays(dt, delta, vx0, ax, kappa0, kdot, x, w, ups, sig, veh, nx, lam, gam, ub, nub, ilo, ihi, off, q_force,
+def _predict_arrays(dt, delta0, ddot, vx0, ax, kappa0, kdot, x, w, ups, sig, veh, nx, lam, gam, ub, nub, ilo, ihi, off, q_force,
                     h_max, phi, dphi, spm, spp, ht, k1, k2, k3, k4, y, J, Phi, Gm, T1, U):  # fmt: skip
     """:func:`predict` on plain arrays (the hot path: no tuple access inside the loops)."""
     nw = w.shape[0]
@@ -395,8 +397,13 @@ def _predict_arrays(dt, delta, vx0, ax, kappa0, kdot, x, w, ups, sig, veh, nx, l
     if n_sub < 1:
         n_sub = 1
     h = dt / n_sub
-    cd = math.cos(delta)
     for s in range(n_sub):
+        delta = delta0 + ddot * s * h
+        delta_m = delta + 0.5 * h * ddot
+        delta_1 = delta + h * ddot
+        cd = math.cos(delta)
+        cd_m = math.cos(delta_m)
+        cd_1 = math.cos(delta_1)
         v0 = vx0 + ax * s * h
         vm = v0 + 0.5 * h * ax
         v1 = v0 + h * ax
@@ -468,16 +475,16 @@ def _predict_arrays(dt, delta, vx0, ax, kappa0, kdot, x, w, ups, sig, veh, nx, l
         # RK4 of the state (the speed ramps within the sub-step)
         for i in range(nx):
             y[i] = x[i] + 0.5 * h * k1[i]
-        _rhs_arrays(y, delta, cd, vm, kappa_m, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k2,
-                    False)  # fmt: skip
+        _rhs_arrays(y, delta_m, cd_m, vm, kappa_m, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht,
+                    k2, False)  # fmt: skip
         for i in range(nx):
             y[i] = x[i] + 0.5 * h * k2[i]
-        _rhs_arrays(y, delta, cd, vm, kappa_m, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k3,
-                    False)  # fmt: skip
+        _rhs_arrays(y, delta_m, cd_m, vm, kappa_m, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht,
+                    k3, False)  # fmt: skip
         for i in range(nx):
             y[i] = x[i] + h * k3[i]
-        _rhs_arrays(y, delta, cd, v1, kappa_1, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, k4,
-                    False)  # fmt: skip
+        _rhs_arrays(y, delta_1, cd_1, v1, kappa_1, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht,
+                    k4, False)  # fmt: skip
         for i in range(nx):
             x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
 
@@ -854,7 +861,7 @@ def _store_state(st, slot):
 
 
 @njit(cache=True)
-def _push_history(st, t, delta, vx, ax, kappa, kdot, zk):
+def _push_history(st, t, delta, vx, ax, kappa, kdot, ddot, zk):
     """Store the prior and the inputs of the row being processed; advance the counter."""
     H = st.hist_t.shape[0]
     slot = int(st.hist_meta[HM_HEAD])
@@ -867,6 +874,7 @@ def _push_history(st, t, delta, vx, ax, kappa, kdot, zk):
     st.hist_u[i, 4] = zk[CH_AY]
     st.hist_u[i, 5] = zk[CH_R]
     st.hist_u[i, 6] = kdot
+    st.hist_u[i, 7] = ddot
     _store_state(st, slot)
     st.hist_meta[HM_HEAD] = slot + 1
     st.hist_meta[HM_COUNT] = min(st.hist_meta[HM_COUNT] + 1, H)
@@ -910,24 +918,26 @@ def delayed_camera(st, zk, M, G, S, adapt, accumulate, acc, score, k, wk, zrow):
         j -= 1
     sj = j % H
     _restore_state(st, j)
-    d, v, a, kap, kd = st.hist_u[sj, 0], st.hist_u[sj, 1], st.hist_u[sj, 2], st.hist_u[sj, 3], st.hist_u[sj, 6]
+    d, v, a, kap, kd, dd = (st.hist_u[sj, 0], st.hist_u[sj, 1], st.hist_u[sj, 2], st.hist_u[sj, 3], st.hist_u[sj, 6],
+                            st.hist_u[sj, 7])  # fmt: skip
     if S.use_imu:
         _stored_imu(st, j, zrow)
         update(GROUP_IMU, st, d, v, zrow, M, G, S, False, False, acc, score, k, wk)
     dtp = max(tau - st.hist_t[sj], 0.0)
-    predict(st, dtp, d, v, a, kap, kd, M, S, wk)
-    res = update(GROUP_CAMERA, st, d, v + a * dtp, zk, M, G, S, adapt, accumulate, acc, score, k, wk)
+    predict(st, dtp, d, dd, v, a, kap, kd, M, S, wk)
+    res = update(GROUP_CAMERA, st, d + dd * dtp, v + a * dtp, zk, M, G, S, adapt, accumulate, acc, score, k, wk)
     if j == now:
         return res
-    predict(st, st.hist_t[(j + 1) % H] - st.hist_t[sj] - dtp, d, v + a * dtp, a, kap + kd * dtp, kd, M, S, wk)
+    predict(st, st.hist_t[(j + 1) % H] - st.hist_t[sj] - dtp, d + dd * dtp, dd, v + a * dtp, a, kap + kd * dtp, kd, M,
+            S, wk)  # fmt: skip
     for i in range(j + 1, now):
         si = i % H
         _store_state(st, i)
         if S.use_imu:
             _stored_imu(st, i, zrow)
             update(GROUP_IMU, st, st.hist_u[si, 0], st.hist_u[si, 1], zrow, M, G, S, False, False, acc, score, k, wk)
-        predict(st, st.hist_t[(i + 1) % H] - st.hist_t[si], st.hist_u[si, 0], st.hist_u[si, 1], st.hist_u[si, 2],
-                st.hist_u[si, 3], st.hist_u[si, 6], M, S, wk)  # fmt: skip
+        predict(st, st.hist_t[(i + 1) % H] - st.hist_t[si], st.hist_u[si, 0], st.hist_u[si, 7], st.hist_u[si, 1],
+                st.hist_u[si, 2], st.hist_u[si, 3], st.hist_u[si, 6], M, S, wk)  # fmt: skip
     _store_state(st, now)
     return res
 
@@ -993,8 +1003,12 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
         st.hs[HS_PREV_T] = tk
         st.hs[HS_PREV_KAPPA] = kappa[k]
         st.hs[HS_KAPPA_RATE] = kd
+        # the steering's ramp to the next row (first-order hold; the last row of a call is held)
+        dd = 0.0
+        if S.steering_ramp and k < n - 1 and t[k + 1] > tk and delta[k + 1] == delta[k + 1]:
+            dd = (delta[k + 1] - delta[k]) / (t[k + 1] - tk)
         if delayed and not shift:
-            _push_history(st, tk, delta[k], vx[k], ax[k], kappa[k], kd, zk)
+            _push_history(st, tk, delta[k], vx[k], ax[k], kappa[k], kd, dd, zk)
         accumulate = S.mode == MODE_FIXED and tk >= S.accumulate_from
         nis_row = 0.0
         dof_row = 0
@@ -1062,22 +1076,22 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
                     if dtp < done:
                         dtp = done
                     if dtp > done:
-                        predict(st, dtp - done, delta[k], vx[k] + ax[k] * done, ax[k], kappa[k] + kd * done, kd, M, S,
-                                wk)  # fmt: skip
+                        predict(st, dtp - done, delta[k] + dd * done, dd, vx[k] + ax[k] * done, ax[k],
+                                kappa[k] + kd * done, kd, M, S, wk)  # fmt: skip
                     done = dtp
                     for c in range(N_CHANNELS):
                         zrow[c] = z[nf, c]
                     acc_f = t[nf] >= S.accumulate_from
-                    nis, dof, n0, n1 = update(GROUP_CAMERA, st, delta[k], vx[k] + ax[k] * dtp, zrow, M, G, S, False,
+                    nis, dof, n0, n1 = update(GROUP_CAMERA, st, delta[k] + dd * dtp, vx[k] + ax[k] * dtp, zrow, M, G, S, False,
                                               acc_f, acc, out.score, nf, wk)  # fmt: skip
                     if dof > 0:
                         _health_push(st, t[nf], nis, dof, S, M)
                     nf = _next_frame(z, nf + 1)
                 if k < n - 1 or predict_last:
-                    predict(st, dt_row - done, delta[k], vx[k] + ax[k] * done, ax[k], kappa[k] + kd * done, kd, M, S,
-                            wk)  # fmt: skip
+                    predict(st, dt_row - done, delta[k] + dd * done, dd, vx[k] + ax[k] * done, ax[k], kappa[k] + kd * done,
+                            kd, M, S, wk)  # fmt: skip
             else:
-                predict(st, dt_row, delta[k], vx[k], ax[k], kappa[k], kd, M, S, wk)
+                predict(st, dt_row, delta[k], dd, vx[k], ax[k], kappa[k], kd, M, S, wk)
     if S.mode == MODE_FIXED:  # the fit's normal matrix is accumulated in its upper triangle
         for a in range(nw):
             for b in range(a + 1, nw):

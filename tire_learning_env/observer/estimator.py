@@ -44,7 +44,8 @@ from .calibration import estimate_noise_std, sample_period
 from .gains import GainDesign, ObserverGains, synthesize_gains
 from .model import MeasurementModel, measurement_model
 from .neuro_adaptive import AdaptationParams, HealthParams, NeuroAdaptiveObserver, axle_index
-from .offline import OfflineFit, calibrate_force_error, curve_gradient, pem_cost, refine, select_prior_length, stiffness_readout
+from .offline import (OfflineFit, calibrate_force_error, curve_gradient, pem_cost, refine, select_prior_length,
+                      steering_hold_sensitivity, stiffness_readout)
 from .trace import EstimateTrace
 
 __all__ = ["ObserverConfig", "build_observer", "estimate", "EstimationResult", "detect_sensors", "fusion_fallback",
@@ -77,6 +78,17 @@ class ObserverConfig(_Params):
         Camera latency [s]; default: estimated from the log (``max_latency`` at most).
     max_latency : float
         Largest latency considered [s].
+    steering_hold : {"ramp", "hold"}, optional
+        How the steering behaves between log rows: ramping to the next row's value (a sampled
+        steering wheel; the default of :func:`estimate`) or held (a simulator's zero-order hold
+        at the row rate; the default of :func:`build_observer`, i.e. on line inside the envs,
+        whose steering is held over each physics step). The
+        log cannot tell (the curve and the latency absorb a wrong hold: the prediction-error
+        cost preferred ``hold`` on a log where it read the stiffness +1.8 / +2.6 % off and
+        ``ramp`` +0.15 / +0.14 %), so the bands add how much the answer moves under the other
+        hold (:func:`.offline.steering_hold_sensitivity`): negligible for rows at 1 kHz,
+        large when the rows are sparse (a closed-loop log at 20 Hz rows: +11 / +18 % held,
+        +1.2 / +1.8 % ramped).
     stiffness_known : bool
         The vehicle file's cornering stiffness is trusted: the curve is pinned to it below
         ``linear_region_deg`` (the paper's Study 1 and 3 setting). Default: learned.
@@ -114,6 +126,7 @@ class ObserverConfig(_Params):
     imu_noise: tuple | None = None
     latency: float | None = None
     max_latency: float = 0.15
+    steering_hold: str | None = None
     stiffness_known: bool = False
     linear_region_deg: float = 0.5
     offline: bool = True
@@ -143,6 +156,8 @@ class ObserverConfig(_Params):
         super().__post_init__()
         if self.sensors not in ("auto", "camera", "imu", "both"):
             raise ParameterError(f"ObserverConfig.sensors must be auto, camera, imu or both, got {self.sensors!r}")
+        if self.steering_hold not in (None, "hold", "ramp"):
+            raise ParameterError(f"ObserverConfig.steering_hold must be 'hold', 'ramp' or None, got {self.steering_hold!r}")
         if self.basis not in ("two_sided", "paper"):
             raise ParameterError(f"ObserverConfig.basis must be 'two_sided' or 'paper', got {self.basis!r}")
         for name in ("camera_noise", "imu_noise"):
@@ -302,6 +317,8 @@ def build_observer(
         initial_weights=initial_weights, physics_dt=physics_dt, sample_period=frame_period,
         pinned_slip=math.radians(config.linear_region_deg) if config.stiffness_known else 0.0,
     )  # fmt: skip
+    # on line there is no log to choose from: the envs' steering is held over each physics step
+    obs.steering_hold = config.steering_hold or "hold"
     return obs
 
 
@@ -660,6 +677,8 @@ def estimate(
         "stiffness": "given (pinned below the linear region)" if config.stiffness_known else "learned (the vehicle "
         "file's Cf, Cr are only the starting point)",
     }
+    obs.steering_hold = config.steering_hold or "ramp"
+    calibration["steering_hold"] = {"used": obs.steering_hold, "source": "given" if config.steering_hold else "default"}
     if model.uses_camera:
         if latency_given is None:
             t0 = time.perf_counter()
@@ -695,6 +714,8 @@ def estimate(
                 obs._state.pw[:] = fit.covariance
         # the prior's length: kept (1 deg unless given), its plausible neighbours' answers in the bands
         fit, calibration["prior_length"] = select_prior_length(obs, rows, fit, choose=False)
+        # the other steering hold: how much the answer leans on what the steering did between rows
+        calibration["steering_hold"].update(steering_hold_sensitivity(obs, rows, fit))
         offline = fit.trace
         runtime["offline_refinement"] = time.perf_counter() - t0
         calibration["offline"] = {

@@ -262,6 +262,10 @@ class NeuroAdaptiveObserver:
         self.h_max = float(h_max)
         self.sample_period = float(sample_period or gains.frame_period)
         self.pinned_slip = float(pinned_slip)
+        #: how the steering behaves between rows: ``"hold"`` (zero-order hold: a simulator's
+        #: steering, constant over its step) or ``"ramp"`` (first-order hold: a sampled continuous
+        #: steering wheel); :func:`~.estimator.estimate` chooses from the log
+        self.steering_hold = "hold"
         self.n_bias = N_BIAS_PARAMS if (self.model.uses_imu and self.adaptation.sensor_offsets) else 0
         nw = basis.n_weights + self.n_bias
         w0 = np.zeros(nw) if initial_weights is None else np.asarray(initial_weights, dtype=float).reshape(-1)
@@ -345,6 +349,7 @@ class NeuroAdaptiveObserver:
             float(max(hp.gap_frames * self.sample_period, hp.min_gap_s)), float(hp.nis_factor), float(hp.rollback_s),
             float(gate), float(accumulate_from), np.zeros(self.model.nx), self.initial_state_covariance(), float(self.dt),
             bool(store_weights), bool(store_scores), bool(compute_std), bool(kalman), bool(record), bool(shift_frames),
+            bool(self.steering_hold == "ramp"),
         )  # fmt: skip
 
     # -- state ------------------------------------------------------------------------------------
@@ -366,7 +371,7 @@ class NeuroAdaptiveObserver:
             x, np.clip(w, lo, hi).astype(float), np.zeros((nx, nw)), self.initial_state_covariance(),
             np.ascontiguousarray(self.prior_covariance()), hs, np.zeros((min(W, 4000), 2)), np.zeros(8), np.zeros((8, nw)),
             np.zeros((8, nw, nw)), np.zeros(hlen), np.zeros((hlen, nx)), np.zeros((hlen, nx, nw)), np.zeros((hlen, nx, nx)),
-            np.zeros((hlen, 7)), np.zeros(2, dtype=np.int64),
+            np.zeros((hlen, 8)), np.zeros(2, dtype=np.int64),
         )  # fmt: skip
         self._t0: float | None = None
         self._block: dict | None = None  # the "block" law's running fit (see _run_blocks)
@@ -550,9 +555,11 @@ class NeuroAdaptiveObserver:
                 b["healthy"] = False  # adaptation frozen while the health flag is tripped
             pieces.append(tr)
             if not last:  # to the next row, as run() would have predicted inside one call
-                self.predict(float(t[j] - t[j - 1]), float(rows["delta"][j - 1]), float(rows["vx"][j - 1]),
-                             float(rows["kappa"][j - 1]), float(rows["ax"][j - 1]),
-                             float(self._state.hs[K.HS_KAPPA_RATE]))  # fmt: skip
+                dt_j = float(t[j] - t[j - 1])
+                d0, d1 = float(rows["delta"][j - 1]), float(rows["delta"][j])
+                ramp = (d1 - d0) / dt_j if (self.steering_hold == "ramp" and dt_j > 0 and np.isfinite(d1)) else 0.0
+                self.predict(dt_j, d0, float(rows["vx"][j - 1]), float(rows["kappa"][j - 1]), float(rows["ax"][j - 1]),
+                             float(self._state.hs[K.HS_KAPPA_RATE]), ramp)  # fmt: skip
                 self.t = float(t[j])
             k = j
         if len(pieces) == 1:
@@ -566,15 +573,18 @@ class NeuroAdaptiveObserver:
         return EstimateTrace(**arrays, state_names=first.state_names, meta=dict(first.meta))
 
     def predict(self, dt: float | None = None, delta: float = 0.0, vx: float | None = None, kappa: float = 0.0,
-                ax: float = 0.0, kappa_rate: float = 0.0) -> "NeuroAdaptiveObserver":  # fmt: skip
-        """Advance ``dt`` [s] (default ``physics_dt``) with the steering [rad] held, the speed [m/s]
-        ramping with the longitudinal acceleration ``ax`` [m/s^2] and the path curvature [1/m]
-        with ``kappa_rate`` [1/(m s)] (:meth:`run` uses the backward difference of its rows)."""
+                ax: float = 0.0, kappa_rate: float = 0.0, steering_rate: float = 0.0) -> "NeuroAdaptiveObserver":  # fmt: skip
+        """Advance ``dt`` [s] (default ``physics_dt``): the steering [rad] ramping with
+        ``steering_rate`` [rad/s] (0: held), the speed [m/s] with the longitudinal acceleration
+        ``ax`` [m/s^2], the path curvature [1/m] with ``kappa_rate`` [1/(m s)] (:meth:`run` uses
+        the backward difference of its rows for the curvature, and the ramp to the next row for
+        the steering when :attr:`steering_hold` is ``"ramp"``)."""
         dt = self.dt if dt is None else float(dt)
         vx = self.vehicle.vx if vx is None else float(vx)
         S = self._settings(K.MODE_CAUSAL, self._t0 or self.t)
         wk = K.make_work(self.model.nx, self.n_weights, self._bounds[0].shape[1])
-        K.predict(self._state, dt, float(delta), vx, float(ax), float(kappa), float(kappa_rate), self._model_tuple, S, wk)
+        K.predict(self._state, dt, float(delta), float(steering_rate), vx, float(ax), float(kappa), float(kappa_rate),
+                  self._model_tuple, S, wk)  # fmt: skip
         self.t += dt
         return self
 

@@ -145,13 +145,16 @@ class OfflineFit:
         return prior_part + np.maximum(sandwich, data_part) + self.prior_sensitivity(g)
 
     def prior_sensitivity(self, g: NDArray) -> NDArray:
-        """Largest squared change of ``g^T w`` among the plausible prior lengths
-        (:func:`select_prior_length`; zero when none was plausible or none was compared)."""
+        """Sensitivity variance of ``g^T w``: per assumption the log cannot settle, the largest
+        squared change among its plausible alternatives (the prior length,
+        :func:`select_prior_length`; the steering hold, :func:`steering_hold_sensitivity`),
+        summed over the assumptions."""
         g = np.atleast_2d(g)
-        alts = getattr(self, "prior_alternatives", None) or []
-        if not alts:
-            return np.zeros(g.shape[0])
-        return np.max(np.vstack([(g @ d) ** 2 for d in alts]), axis=0)
+        out = np.zeros(g.shape[0])
+        for alts in (getattr(self, "prior_alternatives", None) or [], getattr(self, "hold_alternatives", None) or []):
+            if alts:
+                out += np.max(np.vstack([(g @ d) ** 2 for d in alts]), axis=0)
+        return out
 
     def inflation_factor(self, g: NDArray) -> NDArray:
         g = np.atleast_2d(g)
@@ -499,8 +502,49 @@ def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: Off
     new.force_error = fit.force_error
     new.force_error_calibration = fit.force_error_calibration
     new.prior_alternatives = getattr(fit, "prior_alternatives", [])
+    new.hold_alternatives = getattr(fit, "hold_alternatives", [])
     new.nis_per_dof = _nis_per_dof(acc)
     return new, info
+
+
+def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, gate: float = 25.0,
+                              max_iter: int = 2, tol: float = 1e-3, min_decrease: float = 1e-2,
+                              min_row_period: float = 0.002) -> dict:  # fmt: skip
+    """Refit under the other steering hold (``hold`` <-> ``ramp``) from the fit's weights and keep
+    the weight change in ``fit.hold_alternatives`` (:meth:`OfflineFit.variance` adds it).
+
+    What the steering did between two log rows is not in the log. A simulator holds it over
+    its step; a steering wheel sampled by a logger moves continuously; a driver reacting to
+    camera frames does a bit of both. Neither the prediction-error cost nor the evidence can
+    tell (the learned curve and the latency absorb a wrong choice), so the answer's change
+    under the other hold is reported as uncertainty: half of it is one standard deviation
+    (the two holds bracket what the steering did). Rows closer than ``min_row_period`` [s]
+    (a 1 kHz log) are skipped: the two holds differ by less than half a millisecond there.
+    """
+    t = np.asarray(sensors["t"], dtype=float)
+    period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    used = observer.steering_hold
+    other = "hold" if used == "ramp" else "ramp"
+    if period < min_row_period:
+        fit.hold_alternatives = []
+        return {"other": other, "sensitivity": "skipped: rows closer than "
+                f"{1000 * min_row_period:g} ms, the holds differ by less than half of that"}  # fmt: skip
+    lo, hi = observer._weight_box()
+    fit_from = float(t[0]) + observer.settle_s
+    w0 = np.zeros_like(fit.weights)
+    observer.steering_hold = other
+    try:
+        w_alt, _, _, it = _gauss_newton(observer, sensors, fit.weights, w0, fit.prior_precision, lo, hi, fit_from, gate,
+                                        max_iter, tol, min_decrease)  # fmt: skip
+    finally:
+        observer.steering_hold = used
+        observer.reset(weights=fit.weights)
+        observer._state.pw[:] = fit.covariance
+    # the two holds bracket what the steering did (held, ramped, or in between): half the change
+    # is the standard deviation, so the two-sigma band reaches the other hold's answer
+    fit.hold_alternatives = [0.5 * (w_alt - fit.weights)]
+    return {"other": other, "sensitivity": "refitted under the other hold; the change is in the bands",
+            "iterations": it}  # fmt: skip
 
 
 def pem_cost(observer: NeuroAdaptiveObserver, sensors: dict, w: NDArray, prior_cov: NDArray | None = None,
@@ -564,4 +608,5 @@ def stiffness_readout(observer: NeuroAdaptiveObserver, w: NDArray, slip: NDArray
     return 0.5 * g_axle, info
 
 
-__all__ += ["pem_cost", "axle_index", "stiffness_readout", "calibrate_force_error", "select_prior_length"]
+__all__ += ["pem_cost", "axle_index", "stiffness_readout", "calibrate_force_error", "select_prior_length",
+            "steering_hold_sensitivity"]
