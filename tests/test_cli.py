@@ -209,3 +209,12 @@ def test_one_noise_grammar_on_every_command(tmp_path, capsys):
                               "--camera-noise", "0.01", "0.01"])  # fmt: skip
     with pytest.raises(ParameterError, match="not both"):
         config_from_args(args, "camera")
+
+
+def test_estimate_without_the_offline_pass_scores_the_causal_one(tmp_path, short_log):
+    """--no-offline on a log with truth columns: the causal scores are the reported ground truth
+    (they were once stored inside themselves: "Circular reference detected" on writing)."""
+    out = tmp_path / "online"
+    assert main(["estimate", str(short_log), "--out", str(out), "--no-offline", "-q"]) == 0
+    gt = json.loads((out / "metrics.json").read_text())["ground_truth"]
+    assert "online" not in gt and set(gt["stiffness_inside_2sigma_band"]) == {"front", "rear"}
