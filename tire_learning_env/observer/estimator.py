@@ -111,7 +111,11 @@ class ObserverConfig(_Params):
         ``prior_length`` for IMU-only (:class:`~.neuro_adaptive.AdaptationParams` says why).
     causal_update, block_s
         The causal pass' learning law and its block length [s]
-        (:class:`~.neuro_adaptive.AdaptationParams`).
+        (:class:`~.neuro_adaptive.AdaptationParams`). Default: ``"block"`` with a camera,
+        ``"rls"`` for IMU only: on the real Ferrari log the block law's causal sideslip RMSE
+        was 0.43 / 0.55 deg per half against 0.38 / 0.30 deg for the per-measurement law (on
+        a simulated noisy-a_y log it was the other way round, 0.072 against 0.119 deg; the
+        real car decides).
     nis_factor : float
         Health test margin (:class:`~.neuro_adaptive.HealthParams`).
     identifiable_rel_2sigma : float
@@ -140,7 +144,7 @@ class ObserverConfig(_Params):
     prior_length: float = 1.0
     prior_symmetry: float = 0.8
     online_prior_length: float | None = None
-    causal_update: str = "block"
+    causal_update: str | None = None
     block_s: float = 2.0
     sensor_offsets: bool = True
     nis_factor: float = 3.0
@@ -181,7 +185,7 @@ class ObserverConfig(_Params):
         return AdaptationParams(
             initial_std=self.initial_std, random_walk=self.random_walk, max_std=self.max_std,
             prior_length=self.prior_length, prior_symmetry=self.prior_symmetry, sensor_offsets=self.sensor_offsets,
-            online_prior_length=self.online_prior_length, causal_update=self.causal_update, block_s=self.block_s,
+            online_prior_length=self.online_prior_length, causal_update=self.causal_update or "block", block_s=self.block_s,
         )  # fmt: skip
 
     def gain_design(self) -> GainDesign:
@@ -309,6 +313,8 @@ def build_observer(
     adaptation = config.adaptation()
     if adaptation.online_prior_length is None and model.uses_camera:
         adaptation = adaptation.replace(online_prior_length=0.0)
+    if config.causal_update is None and not model.uses_camera:  # IMU only: see ObserverConfig.causal_update
+        adaptation = adaptation.replace(causal_update="rls")
     axle_load = 0.5 * vehicle.m * 9.81
     fe = (config.camera_force_error if model.uses_camera else config.imu_force_error) * axle_load
     obs = NeuroAdaptiveObserver(
