@@ -509,7 +509,7 @@ def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: Off
 
 def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, gate: float = 25.0,
                               max_iter: int = 2, tol: float = 1e-3, min_decrease: float = 1e-2,
-                              min_row_period: float = 0.002) -> dict:  # fmt: skip
+                              min_row_period: float = 0.002, window_s: float = 300.0) -> dict:  # fmt: skip
     """Refit under the other steering hold (``hold`` <-> ``ramp``) from the fit's weights and keep
     the weight change in ``fit.hold_alternatives`` (:meth:`OfflineFit.variance` adds it).
 
@@ -520,6 +520,8 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
     under the other hold is reported as uncertainty: half of it is one standard deviation
     (the two holds bracket what the steering did). Rows closer than ``min_row_period`` [s]
     (a 1 kHz log) are skipped: the two holds differ by less than half a millisecond there.
+    A log longer than ``window_s`` [s] is refitted under both holds on its most active window
+    (the change, a timing effect, is about the same on any stretch of the drive).
     """
     t = np.asarray(sensors["t"], dtype=float)
     period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
@@ -530,21 +532,28 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
         return {"other": other, "sensitivity": "skipped: rows closer than "
                 f"{1000 * min_row_period:g} ms, the holds differ by less than half of that"}  # fmt: skip
     lo, hi = observer._weight_box()
-    fit_from = float(t[0]) + observer.settle_s
     w0 = np.zeros_like(fit.weights)
-    observer.steering_hold = other
+    rows = _continuation_rows(sensors, window_s)  # a long log: its most active window, both holds refitted
+    t_w = np.asarray(rows["t"], dtype=float)
+    fit_from = float(t_w[0]) + observer.settle_s
     try:
-        w_alt, _, _, it = _gauss_newton(observer, sensors, fit.weights, w0, fit.prior_precision, lo, hi, fit_from, gate,
+        w_same = fit.weights
+        if len(t_w) < len(t):
+            w_same, _, _, _ = _gauss_newton(observer, rows, fit.weights, w0, fit.prior_precision, lo, hi, fit_from,
+                                            gate, max_iter, tol, min_decrease)  # fmt: skip
+        observer.steering_hold = other
+        w_alt, _, _, it = _gauss_newton(observer, rows, w_same, w0, fit.prior_precision, lo, hi, fit_from, gate,
                                         max_iter, tol, min_decrease)  # fmt: skip
     finally:
         observer.steering_hold = used
         observer.reset(weights=fit.weights)
         observer._state.pw[:] = fit.covariance
+    w_alt = fit.weights + (w_alt - w_same)
     # the two holds bracket what the steering did (held, ramped, or in between): half the change
     # is the standard deviation, so the two-sigma band reaches the other hold's answer
     fit.hold_alternatives = [0.5 * (w_alt - fit.weights)]
     return {"other": other, "sensitivity": "refitted under the other hold; the change is in the bands",
-            "iterations": it}  # fmt: skip
+            "iterations": it, "window_s": [float(t_w[0]), float(t_w[-1])]}  # fmt: skip
 
 
 def pem_cost(observer: NeuroAdaptiveObserver, sensors: dict, w: NDArray, prior_cov: NDArray | None = None,
