@@ -186,17 +186,22 @@ def score(result, truth: dict, expected_verdict: str = "found", kind: str = "cam
     return out
 
 
-def suite_accuracy(rates=(100.0, 20.0)) -> dict:
+def suite_accuracy(rates=(100.0, 20.0), only: str | None = None) -> dict:
+    """Every case at each camera rate (``only``: cases whose label contains this text)."""
     out = {}
     for rate in rates:
         block = {}
         for label, (hidden, truth, speed) in {**CASES, **TWO_EFFECT_CASES}.items():
+            if only and only not in label:
+                continue
             res = analyze(make_log(hidden, rate=rate, speed=speed), progress=False)
             block[label] = score(res, truth)
             print(f"[{rate:g} Hz] {label}: {block[label]['verdict']} {block[label]['named']} "
                   f"err {block[label]['worst_parameter_error_pct']} ratio {block[label]['gap_ratio_all_channels']}",
                   file=sys.stderr)  # fmt: skip
         for label, hidden in OUT_OF_LIBRARY.items():
+            if only and only not in label:
+                continue
             res = analyze(make_log(hidden, rate=rate), progress=False)
             block[label] = score(res, {}, expected_verdict="unexplained")
             print(f"[{rate:g} Hz] {label}: {res.verdict} partial {block[label]['partial']}", file=sys.stderr)
@@ -659,6 +664,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=20, help="clean suite: number of noise seeds")
     ap.add_argument("--samplings", nargs="+", default=list(SAMPLINGS), choices=list(SAMPLINGS),
                     help="clean_sampling suite: sampling variants")
+    ap.add_argument("--cases", default=None, help="accuracy suite: only the cases whose label contains this text")
     ap.add_argument("--robustness-seeds", type=int, default=5, help="robustness suite: noise seeds per effect")
     ap.add_argument("--rates", type=float, nargs="+", default=[100.0, 20.0], help="accuracy suite: camera rates [Hz]")
     args = ap.parse_args()
@@ -666,7 +672,7 @@ def main() -> None:
     if args.suite in ("speed", "all"):
         result["speed"] = suite_speed()
     if args.suite in ("accuracy", "all"):
-        result["accuracy"] = suite_accuracy(tuple(args.rates))
+        result["accuracy"] = suite_accuracy(tuple(args.rates), args.cases)
     if args.suite in ("speed_long", "all"):
         result["speed_long"] = suite_speed_long()
     if args.suite in ("clean_sampling", "all"):

@@ -199,6 +199,18 @@ def estimate_input_noise(model, evaluation) -> InputNoise:
     svds = _svd_windows(model, evaluation, sub, n_b, sigma_u, 1e-6)
     objective = {float(lam): _reml(d, evaluation, sub, svds, float(lam)) for lam in LAMBDA_GRID}
     lam = min(objective, key=objective.get)
+    grid = sorted(objective)
+    i = grid.index(lam)
+    if 1 < i < len(grid) - 1:
+        # refine: the vertex of a parabola in log(lambda) through the best grid point and its neighbours
+        x = np.log(grid[i - 1 : i + 2])
+        y = np.array([objective[g] for g in grid[i - 1 : i + 2]])
+        a, b, _ = np.polyfit(x, y, 2)
+        if a > 0:
+            cand = float(np.exp(np.clip(-b / (2 * a), x[0], x[2])))
+            objective[cand] = _reml(d, evaluation, sub, svds, cand)
+            if objective[cand] < objective[lam]:
+                lam = cand
     if lam <= 0.0:
         return InputNoise(0.0, sigma_u, n_b, [], [], objective)
     # whitening of every window; singular directions whose variance is below 1e-3 of the noise are dropped

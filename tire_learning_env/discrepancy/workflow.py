@@ -510,6 +510,15 @@ def analyze(
         entries = []
         for e, values, stderr in sel.accepted:
             ev = _evidence(sel, e, n, config)
+            if e.name == "road_superelevation" and data.kind == "camera":
+                # the cap is identified only where it binds: say whether it was reached on this log
+                reached = float(values[0] * np.max(np.abs(data.kappa)))
+                ev["largest_superelevation_on_this_log_rad"] = min(reached, float(values[1]))
+                if reached <= 1.02 * values[1]:  # within 2 %: the cap touches at most the sharpest curve
+                    ev["note"] = (
+                        f"the cap is not reached on this log (rate x largest |kappa| = {reached:.3g} rad): the log "
+                        "bounds the cap from below only; its value and standard error are not an estimate"
+                    )
             entries.append(_effect_entry(e, values, stderr, ev, data.channels, data.kind))
         ambiguous: list[dict] = []
         manoeuvre = None
