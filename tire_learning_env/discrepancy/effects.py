@@ -232,8 +232,8 @@ LIBRARY: tuple[CandidateEffect, ...] = (
         ("rate", "cap"), ("rad m", "rad"), (TH_SUPER_RATE, TH_SUPER_CAP), ((0.0, 60.0), (0.005, 0.15)), (5.0, 0.02),
         (0.0, 0.1),
         # the cap has no gradient where it does not bind: a grid of starts over the road-design range
-        # (caps 2-6 deg, reached from R = 150-1000 m) so the fit starts in the right basin
-        tuple((r, c) for r in (5.0, 10.0, 20.0, 40.0) for c in (0.035, 0.05, 0.07, 0.105)),
+        # (caps 1.7-6.9 deg, reached from R = 100-2000 m) so the fit starts in the right basin
+        tuple((r, c) for r in (6.0, 12.0, 25.0, 50.0) for c in (0.03, 0.045, 0.06, 0.09, 0.12)),
     ),
     _one("camera_heading_drift", "camera heading bias that drifts slowly: measured e2 = true e2 + drift_rate "
          "(t - t_mid), t_mid the middle of the log, on top of any constant camera_heading_bias (e.g. a camera mount "
