@@ -6,8 +6,10 @@ linear, Pacejka or learned tire); :func:`analyze` compares them without open-loo
 by regime (:mod:`.diagnostics`), names the missing physical effect from a library of
 candidate augmentations (:mod:`.effects`) by fitting each one and selecting greedily with
 a likelihood-ratio test and the BIC (:mod:`.selection`), adds it and reports the gap
-before and after (:mod:`.report`). The verdict is ``found``, ``none`` or ``unexplained``
-(:mod:`.workflow`). :mod:`.truth` puts named effects into simulated logs.
+before and after (:mod:`.report`). The verdict is ``found``, ``ambiguous`` (candidates that fit
+equally well, with the manoeuvre that separates them, :mod:`.separation`), ``none`` or
+``unexplained`` (:mod:`.workflow`). The steering a sparse log does not show is part of the noise
+(:mod:`.noise`). :mod:`.truth` puts named effects into simulated logs.
 
 >>> from tire_learning_env.discrepancy import EFFECT_NAMES
 >>> EFFECT_NAMES[:3]

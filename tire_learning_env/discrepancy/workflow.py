@@ -9,6 +9,10 @@ Verdict rules (``config`` = :class:`.config.DiscrepancyConfig`):
 - ``found``: at least one candidate effect passed the selection criterion
   (:mod:`.selection`) *and* the residual of the model with the accepted effects is white
   (camera portmanteau test, p >= ``whiteness_alpha``);
+- ``ambiguous``: as ``found``, but another candidate that also passed fits about equally
+  well (BIC within ``ambiguity_bic``): the candidates are listed with their evidence, none is
+  named, and the separating manoeuvre is proposed and checked by simulation
+  (:mod:`.separation`);
 - ``none``: no candidate passed and the nominal residual is white: the nominal model
   explains the data within the noise;
 - ``unexplained``: a structured residual remains (not white) that the accepted effects,
