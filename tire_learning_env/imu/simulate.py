@@ -58,6 +58,7 @@ def simulate_imu_drive(
     substeps: int = 10,
     vibration: tuple[float, float, float] | None = None,
     offsets: tuple[float, float] = (0.0, 0.0),
+    steering: str = "held",
 ) -> tuple[dict[str, NDArray], dict[str, NDArray], tuple[PacejkaTire, PacejkaTire]]:
     """Simulate a drive; returns ``(sensors, truth, (front_tire, rear_tire))``.
 
@@ -87,9 +88,17 @@ def simulate_imu_drive(
         white noise (its own generator, seeded from ``seed``: the other draws are unchanged).
     offsets : (float, float)
         Constant sensor offsets ``(a_y [m/s^2], r [rad/s])`` added to the measurements.
+    steering : {"held", "continuous"}
+        ``held``: the steering is computed at each sample and held until the next (a
+        zero-order hold at the log rate). ``continuous``: the driver acts at every RK4
+        substep (``dt / substeps``) and the log samples the steering at its rows, as a logger
+        samples a real steering wheel (what :func:`~tire_learning_env.observer.estimate`
+        assumes by default between rows, ``steering_hold="ramp"``).
     """
     if not (duration > 0 and dt > 0 and substeps >= 1):
         raise ParameterError("duration, dt must be > 0 and substeps >= 1")
+    if steering not in ("held", "continuous"):
+        raise ParameterError(f"steering must be 'held' or 'continuous', got {steering!r}")
     rng = np.random.default_rng(seed)
     tire = tire or TireParams()
     tv = true_vehicle or vehicle
@@ -105,8 +114,12 @@ def simulate_imu_drive(
     ax = np.gradient(vx, t)
     # lateral-acceleration command: two sines with a slowly varying envelope (both signs)
     phases = rng.uniform(0, 2 * math.pi, 3)
-    env = 0.55 + 0.45 * np.sin(2 * math.pi * t / 31.0 + phases[0])
-    a_cmd = ay_max * env * (0.7 * np.sin(2 * math.pi * 0.21 * t + phases[1]) + 0.3 * np.sin(2 * math.pi * 0.53 * t + phases[2]))
+
+    def command(tt):
+        env = 0.55 + 0.45 * np.sin(2 * math.pi * tt / 31.0 + phases[0])
+        return ay_max * env * (0.7 * np.sin(2 * math.pi * 0.21 * tt + phases[1]) + 0.3 * np.sin(2 * math.pi * 0.53 * tt + phases[2]))
+
+    a_cmd = command(t)
     kus = m * (lr / (2 * vehicle.Cf) - lf / (2 * vehicle.Cr)) / L  # understeer gradient [rad/(m/s^2)]
     x = np.zeros(2)
     out = np.zeros((n, 2))
@@ -134,8 +147,11 @@ def simulate_imu_drive(
         forces[k] = (ff(a_f), fr(a_r))
         if k == n - 1:
             break
-        for j in range(substeps):  # inputs held over the sample (ZOH), speed interpolated
+        for j in range(substeps):  # inputs held over the sample (ZOH) or the substep, speed interpolated
             v0 = vx[k] + (vx[k + 1] - vx[k]) * j / substeps
+            if steering == "continuous" and j > 0:  # the driver keeps steering between the logged rows
+                a_j = float(command(t[k] + j * h))
+                d = (L / v0**2 + kus) * a_j + 0.05 * (a_j / v0 - x[1])
             v1 = vx[k] + (vx[k + 1] - vx[k]) * (j + 0.5) / substeps
             v2 = vx[k] + (vx[k + 1] - vx[k]) * (j + 1) / substeps
             k1 = rhs(x, d, v0)
