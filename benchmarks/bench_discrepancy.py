@@ -22,6 +22,11 @@ Suites (``--suite``, default ``speed``):
 - ``confounded``: pairs that a log cannot separate (``ambiguous`` with the truth in the set, the
   separating manoeuvre checked by simulation) and the same drive with the manoeuvre (``found``).
 - ``robustness``: every library effect over ``--robustness-seeds`` other noise seeds.
+
+The seed loops of ``clean``, ``clean_sampling`` and ``robustness`` go through the fleet runner
+(:func:`tire_learning_env.fleet.run_items`): serially by default, as Ray tasks with
+``--workers N`` (local Ray) or ``--address ADDR`` (a cluster); a failing run is recorded with its
+error, not a crash of the suite.
 - ``imu``: IMU-only logs (body-frame model, IMU library): every IMU library effect hidden at a
   realistic size in a 90 s race-car drive (:mod:`tire_learning_env.discrepancy.imu_truth`,
   Revs-like vehicle, Pacejka mu = 1.4, IMU noise of the Revs log's size), two-effect cases, an
@@ -216,12 +221,54 @@ def suite_accuracy(rates=(100.0, 20.0), only: str | None = None) -> dict:
     return out
 
 
+#: the fleet runner's settings (``--workers``, ``--address``); serial without them
+RUNNER = {"workers": 1, "address": None}
+
+
+def _map(fn, items: list, keys: list, desc: str) -> list:
+    """``fn`` over ``items`` through :func:`tire_learning_env.fleet.run_items` (module docstring)."""
+    from tire_learning_env.fleet import run_items
+
+    parallel = RUNNER["workers"] > 1 or RUNNER["address"] is not None
+    env = {"runtime_env": {"env_vars": {"PYTHONPATH": str(Path(__file__).resolve().parent)}}}
+    return run_items(fn, items, keys=keys, workers=RUNNER["workers"], address=RUNNER["address"],
+                     engine="ray" if parallel else "serial", progress=False, desc=desc, ray_init_kwargs=env)  # fmt: skip
+
+
+def _failed(r) -> dict:
+    return {"status": "failed", "error": r.error, "key": r.key}
+
+
+def _robustness_case(item: tuple) -> dict:
+    hidden, truth, speed, seed, rate = item
+    return score(analyze(make_log(hidden, seed=seed, rate=rate, speed=speed), progress=False), truth)
+
+
+def _clean_case(item: tuple) -> dict:
+    seed, rate = item
+    res = analyze(make_log({}, seed=seed, rate=rate), progress=False)
+    return {"seed": seed, "verdict": res.verdict, "named": [e["name"] for e in res.effects],
+            "whiteness_p": res.whiteness_before.p_value, "runtime_s": round(res.runtime_s, 2)}  # fmt: skip
+
+
+def _sampling_case(item: tuple) -> dict:
+    kind, seed = item
+    res = analyze(make_sampled_log(kind, seed), progress=False)
+    named = [e["name"] for e in res.effects] + [c["name"] for c in res.candidates]
+    return {"seed": seed, "verdict": res.verdict, "named": named,
+            "input_noise_lambda": None if res.input_noise is None else res.input_noise.scale,
+            "steering": res.steering_mode, "runtime_s": round(res.runtime_s, 2)}  # fmt: skip
+
+
 def suite_robustness(seeds: int, rate: float) -> dict:
     """Every library effect over several noise seeds: how often it is named right, worst error and ratio."""
     out = {}
     for label, (hidden, truth, speed) in CASES.items():
-        runs = [score(analyze(make_log(hidden, seed=200 + s, rate=rate, speed=speed), progress=False), truth)
-                for s in range(seeds)]  # fmt: skip
+        items = [(hidden, truth, speed, 200 + s, rate) for s in range(seeds)]
+        res = _map(_robustness_case, items, [f"{label}#{200 + s}" for s in range(seeds)], f"robustness {label}")
+        runs = [r.result if r.status != "failed" else
+                {"correct": False, "worst_parameter_error_pct": None, "gap_ratio_all_channels": math.inf,
+                 "verdict": f"failed: {r.error}"} for r in res]  # fmt: skip
         out[label] = {
             "correct": sum(r["correct"] for r in runs),
             "runs": seeds,
@@ -234,14 +281,12 @@ def suite_robustness(seeds: int, rate: float) -> dict:
 
 
 def suite_clean(seeds: int, rate: float = 100.0) -> dict:
-    verdicts = []
-    details = []
-    for seed in range(seeds):
-        res = analyze(make_log({}, seed=100 + seed, rate=rate), progress=False)
-        verdicts.append(res.verdict)
-        details.append({"seed": 100 + seed, "verdict": res.verdict, "named": [e["name"] for e in res.effects],
-                        "whiteness_p": res.whiteness_before.p_value, "runtime_s": round(res.runtime_s, 2)})  # fmt: skip
-        print(f"[clean {rate:g} Hz] seed {100 + seed}: {res.verdict}", file=sys.stderr)
+    items = [(100 + seed, rate) for seed in range(seeds)]
+    res = _map(_clean_case, items, [f"clean@{rate:g}#{i[0]}" for i in items], f"clean {rate:g} Hz")
+    details = [r.result if r.status != "failed" else dict(_failed(r), verdict="failed") for r in res]
+    verdicts = [d["verdict"] for d in details]
+    for d in details:
+        print(f"[clean {rate:g} Hz] seed {d.get('seed', d.get('key'))}: {d['verdict']}", file=sys.stderr)
     return {"rate_hz": rate, "seeds": seeds, "none": verdicts.count("none"), "target_none_of_20": 19, "runs": details}
 
 
@@ -290,14 +335,12 @@ def suite_clean_sampling(seeds: int, kinds=tuple(SAMPLINGS)) -> dict:
     """Clean logs at each sampling variant over ``seeds`` noise seeds (target: ``none`` in >= 19 of 20)."""
     out = {}
     for kind in kinds:
-        runs = []
-        for s in range(seeds):
-            res = analyze(make_sampled_log(kind, 100 + s), progress=False)
-            named = [e["name"] for e in res.effects] + [c["name"] for c in res.candidates]
-            runs.append({"seed": 100 + s, "verdict": res.verdict, "named": named,
-                         "input_noise_lambda": None if res.input_noise is None else res.input_noise.scale,
-                         "steering": res.steering_mode, "runtime_s": round(res.runtime_s, 2)})  # fmt: skip
-            print(f"[clean {kind}] seed {100 + s}: {res.verdict} {named}", file=sys.stderr)
+        items = [(kind, 100 + s) for s in range(seeds)]
+        res = _map(_sampling_case, items, [f"{kind}#{i[1]}" for i in items], f"clean {kind}")
+        runs = [r.result if r.status != "failed" else dict(_failed(r), verdict="failed") for r in res]
+        for r in runs:
+            print(f"[clean {kind}] seed {r.get('seed', r.get('key'))}: {r['verdict']} {r.get('named', r.get('error'))}",
+                  file=sys.stderr)  # fmt: skip
         verdicts = [r["verdict"] for r in runs]
         out[kind] = {"description": SAMPLINGS[kind], "seeds": seeds, "none": verdicts.count("none"),
                      "target": f">= {math.ceil(0.95 * seeds)} of {seeds}", "runs": runs}  # fmt: skip
@@ -674,7 +717,10 @@ def main() -> None:
     ap.add_argument("--cases", default=None, help="accuracy suite: only the cases whose label contains this text")
     ap.add_argument("--robustness-seeds", type=int, default=5, help="robustness suite: noise seeds per effect")
     ap.add_argument("--rates", type=float, nargs="+", default=[100.0, 20.0], help="accuracy suite: camera rates [Hz]")
+    ap.add_argument("--workers", type=int, default=1, help="seed loops as local Ray tasks on this many CPUs (1: serial)")
+    ap.add_argument("--address", default=None, help="seed loops on an existing Ray cluster (e.g. 'auto', 'HOST:PORT')")
     args = ap.parse_args()
+    RUNNER.update(workers=max(1, args.workers), address=args.address)
     result: dict = {"benchmark": "discrepancy"}
     if args.suite in ("speed", "all"):
         result["speed"] = suite_speed()
