@@ -154,6 +154,11 @@ class HealthParams(_Params):
     _positive: ClassVar[tuple[str, ...]] = ("window_s", "min_updates", "nis_factor", "gap_frames", "min_gap_s", "rollback_s")
 
 
+class _KernelRows(dict):
+    """Rows already in the kernel's layout (:func:`sensor_rows`): :meth:`NeuroAdaptiveObserver.run`
+    skips the validation (the block law's pieces of one validated call)."""
+
+
 def sensor_rows(sensors: Mapping[str, ArrayLike], model: MeasurementModel) -> dict[str, NDArray]:
     """The kernel's row arrays from sensor columns: ``t, delta, vx, ax, kappa`` and ``z`` (n, 4).
 
@@ -437,7 +442,7 @@ class NeuroAdaptiveObserver:
         """
         if mode != "fixed" and adapt and record and accumulator is None and self.adaptation.causal_update == "block":
             return self._run_blocks(sensors, predict_last, compute_std=compute_std, store_weights=store_weights)
-        rows = sensor_rows(sensors, self.model)
+        rows = sensors if isinstance(sensors, _KernelRows) else sensor_rows(sensors, self.model)
         n = len(rows["t"])
         nx, nw = self.model.nx, self.n_weights
         if n and self._t0 is None:
@@ -538,8 +543,6 @@ class NeuroAdaptiveObserver:
         fit_from = (self._t0 or 0.0) + self.settle_s
         if b["t_end"] is None:
             b["t_end"] = fit_from + self.adaptation.block_s
-        cols = {"t": t, "delta": rows["delta"], "vx": rows["vx"], "ax": rows["ax"], "kappa": rows["kappa"],
-                "e1": rows["z"][:, 0], "e2": rows["z"][:, 1], "ay": rows["z"][:, 2], "yaw_rate": rows["z"][:, 3]}  # fmt: skip
         pieces: list[EstimateTrace] = []
         k = 0
         while k < n:
@@ -547,7 +550,7 @@ class NeuroAdaptiveObserver:
                 self._close_block()
             j = max(int(np.searchsorted(t, b["t_end"], side="left")), k + 1)
             last = j >= n
-            piece = {c: v[k:j] for c, v in cols.items()}
+            piece = _KernelRows({c: v[k:j] for c, v in rows.items()})  # validated once, above
             tr = self.run(piece, predict_last=predict_last if last else False, mode="fixed", accumulator=b["acc"],
                           accumulate_from=fit_from, gate=25.0, compute_std=compute_std, store_weights=store_weights,
                           kalman=True)  # fmt: skip
