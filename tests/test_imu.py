@@ -295,3 +295,20 @@ def test_module_doctests_run(module):
 
     result = doctest.testmod(importlib.import_module(module), optionflags=doctest.ELLIPSIS)
     assert result.attempted > 0 and result.failed == 0
+
+
+@pytest.mark.parametrize(("steering", "hold"), [("held", "hold"), ("continuous", "ramp")])
+def test_imu_fit_decides_what_the_steering_did_between_rows(steering, hold):
+    """A 50 Hz IMU log whose steering is a staircase at the log rate (a simulator's zero-order hold)
+    or a sampled continuous wheel: a_y answers the steering at once, so the fit under each hold
+    decides (measured chi-square differences 563 and 358), and the estimate is that hold's
+    (the ramp on the staircase read the stiffness 20-30 % off; here both within 3 %), with the
+    reported sideslip better than the KF's (measured 0.009 / 0.011 against 0.026 deg)."""
+    tv = V.replace(Cf=0.9 * V.Cf, Cr=1.05 * V.Cr)
+    sensors, truth, _ = simulate_imu_drive(V, duration=90.0, dt=0.02, true_vehicle=tv, seed=3, steering=steering)
+    res = estimate_imu(sensors, V)
+    info = res.core.calibration["steering_hold"]
+    assert info["used"] == hold and info["sensitivity"].startswith("decided")
+    k = np.array(res.core.cornering_stiffness())
+    assert np.all(np.abs(k / np.array([tv.Cf, tv.Cr]) - 1.0) < 0.03), k / np.array([tv.Cf, tv.Cr]) - 1.0
+    assert _rmse_deg(res.blend.beta, truth["true_beta"]) < _rmse_deg(res.kalman.beta, truth["true_beta"])

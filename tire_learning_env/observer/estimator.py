@@ -735,8 +735,17 @@ def estimate(
                 obs._state.pw[:] = fit.covariance
         # the prior's length: kept (1 deg unless given), its plausible neighbours' answers in the bands
         fit, calibration["prior_length"] = select_prior_length(obs, rows, fit, choose=False)
-        # the other steering hold: how much the answer leans on what the steering did between rows
-        calibration["steering_hold"].update(steering_hold_sensitivity(obs, rows, fit))
+        # the other steering hold: how much the answer leans on what the steering did between rows (with
+        # an IMU the a_y innovations show the steering's timing and the fit decides between the holds)
+        hold_info = steering_hold_sensitivity(obs, rows, fit, decide_by_cost=model.uses_imu)
+        if hold_info.get("switch"):
+            obs.steering_hold = hold_info["other"]
+            frac = fit.force_error / (0.5 * vehicle.m * 9.81)
+            fit = refine(obs, rows, fit.weights, prior_cov=obs.prior_covariance(offline=True), force_errors=(frac,))
+            fit, calibration["prior_length"] = select_prior_length(obs, rows, fit, choose=False)
+            fit.hold_alternatives = []
+            hold_info = dict(hold_info, other=calibration["steering_hold"]["used"], refitted=True)
+        calibration["steering_hold"].update(hold_info, used=obs.steering_hold)
         offline = fit.trace
         runtime["offline_refinement"] = time.perf_counter() - t0
         calibration["offline"] = {
