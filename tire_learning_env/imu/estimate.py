@@ -43,7 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..baselines.kalman import LinearKalmanFilter
 from ..io import DrivingLog, atomic_directory, atomic_write_json, write_table
 from ..observer import EstimateTrace, EstimationResult, ObserverConfig, estimate
-from ..observer.calibration import estimate_noise_std
+from ..observer.calibration import IMU_NOISE_WINDOW_S, estimate_noise_std
 from ..observer.model import check_sensor_columns
 from ..params import ParameterError, VehicleParams
 from .blend import Blend, BlendParams, blend_traces
@@ -54,8 +54,8 @@ __all__ = ["ESTIMATE_COLUMNS", "NOISE_WINDOW_S", "ImuEstimate", "imu_config", "i
 
 #: the first columns of ``estimates.csv``, in this order (the reported, blended estimate)
 ESTIMATE_COLUMNS = ("t", "beta_hat", "vy_hat", "yaw_rate_hat", "alpha_f_hat", "alpha_r_hat", "Fyf_hat", "Fyr_hat")
-#: time span of the local polynomial fits that measure the IMU noise [s]
-NOISE_WINDOW_S = 0.1
+#: time span of the local polynomial fits that measure the IMU noise [s] (the core's)
+NOISE_WINDOW_S = IMU_NOISE_WINDOW_S
 AXLES = ("front", "rear")
 _COLUMNS = ("t", "delta", "vx", "ax", "ay", "yaw_rate")
 

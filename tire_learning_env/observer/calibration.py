@@ -45,6 +45,21 @@ class NoiseEstimate:
                 "relative_standard_error": float(self.relative_se)}  # fmt: skip
 
 
+#: time span of the local polynomial fits that measure an IMU channel's noise [s]: band-limited
+#: vibration (tens of Hz) counts in full at any sample rate (a 9-sample window at 200 Hz saw about
+#: 40 % of 15-45 Hz vibration, and the fused estimate read a 1.6 m/s^2 vibration as 0.15)
+IMU_NOISE_WINDOW_S = 0.1
+
+
+def imu_noise_window(t: ArrayLike, z: ArrayLike) -> int:
+    """Samples per local fit for an IMU channel: :data:`IMU_NOISE_WINDOW_S` at its sample
+    period (odd, at least 9)."""
+    t = np.asarray(t, dtype=float)
+    ok = np.isfinite(np.asarray(z, dtype=float))
+    dt = float(np.median(np.diff(t[ok]))) if ok.sum() > 2 else float(np.median(np.diff(t)))
+    return max(9, int(round(IMU_NOISE_WINDOW_S / max(dt, 1e-6))) | 1)
+
+
 def estimate_noise_std(t: ArrayLike, z: ArrayLike, window: int = 9, degree: int = 4) -> NoiseEstimate:
     """White-noise std of a channel from local polynomial residuals (module docstring).
 

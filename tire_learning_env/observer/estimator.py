@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..params import CameraParams, ParameterError, VehicleParams, _Params
 from .basis import SoftClipBasis, imu_basis, make_basis
-from .calibration import estimate_noise_std, sample_period
+from .calibration import estimate_noise_std, imu_noise_window, sample_period
 from .gains import GainDesign, ObserverGains, synthesize_gains
 from .model import MeasurementModel, measurement_model
 from .neuro_adaptive import AdaptationParams, HealthParams, NeuroAdaptiveObserver, axle_index
@@ -525,8 +525,9 @@ def _noise(config: ObserverConfig, rows: Mapping, model: MeasurementModel, camer
             continue
         est = {}
         for c, i in zip(chans, idx):
-            e = estimate_noise_std(t, rows[c])
-            est[c] = e.to_dict()
+            window = imu_noise_window(t, rows[c]) if group == "imu" else 9
+            e = estimate_noise_std(t, rows[c], window=window)
+            est[c] = dict(e.to_dict(), window_samples=window)
             if math.isfinite(e.std):
                 out[i] = e.std
         info[group] = {"source": "estimated from the log (local polynomial residuals)", "channels": est}
