@@ -323,6 +323,15 @@ def read_log(path: str | Path, min_rows: int = 2, check_units: bool | None = Non
     if unknown:
         warnings.warn(f"{source}: ignoring unknown column(s) {unknown}", stacklevel=2)
     columns = {n: _to_float(cells[n], n, source, first_line) for n in names if n not in unknown}
+    return finish_log(columns, source, notes, min_rows, check_units, sensors)
+
+
+def finish_log(columns: dict[str, NDArray], source: str, notes: list[str], min_rows: int, check_units: bool | None,
+               sensors: str) -> DrivingLog:  # fmt: skip
+    """The checks and the sensor/truth split every reader ends with (CSV here, the logger
+    formats in :mod:`tire_learning_env.formats`): columns, sensor set, row count, units."""
+    if not len(columns.get("t", ())):
+        raise LogFormatError(f"{source}: the log has no rows")
     kind = _validate(columns, source)
     kind = _choose_sensors(columns, kind, sensors, source, notes)
     if len(columns["t"]) < min_rows:

@@ -26,7 +26,7 @@ from typing import Any, Callable, Iterator
 import numpy as np
 from numpy.typing import NDArray
 
-from ..io import SENSOR_COLUMNS, DrivingLog, LogFormatError, _choose_sensors, _validate, check_log_units, current_run_context
+from ..io import DrivingLog, LogFormatError, finish_log
 from .channel_map import UNITS, ChannelMap, ChannelSpec, convert_unit, find_channel_map, load_channel_map
 
 __all__ = ["LOGGER_SUFFIXES", "read_logger_log", "read_channels", "RawChannel", "default_channel_map", "is_ros2_bag",
@@ -486,21 +486,4 @@ def _common_time_base(values, raw, cmap, source, notes) -> dict[str, NDArray]:
 def _finish(columns: dict[str, NDArray], source: str, notes: list[str], min_rows: int, check_units: bool | None,
             sensors: str) -> DrivingLog:  # fmt: skip
     """The same checks and split as :func:`tire_learning_env.io.read_log` after its CSV parsing."""
-    if not len(columns.get("t", ())):
-        raise LogFormatError(f"{source}: the log has no rows")
-    kind = _validate(columns, source)
-    kind = _choose_sensors(columns, kind, sensors, source, notes)
-    if len(columns["t"]) < min_rows:
-        raise LogFormatError(f"{source}: only {len(columns['t'])} rows; at least {min_rows} are needed")
-    if check_units is None:
-        check_units = current_run_context().check_units
-    if check_units:
-        check_log_units(columns, kind, source)
-    else:
-        notes.append("unit plausibility checks skipped (--no-unit-checks)")
-    sensor_cols = {k: columns[k] for k in SENSOR_COLUMNS if k in columns}
-    if kind == "imu":
-        for k in ("e1", "e2", "kappa"):
-            sensor_cols.pop(k, None)
-    truth = {k: v for k, v in columns.items() if k.startswith("true_")}
-    return DrivingLog(sensor_cols, truth, kind, source, [f"read {len(columns['t'])} rows, {kind} log"] + notes)
+    return finish_log(columns, source, notes, min_rows, check_units, sensors)
