@@ -323,17 +323,16 @@ def _rhs_arrays(x, delta, cd, vx, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi
     return kf, kr
 
 
-@njit(cache=True)
-def _jacobian(cd, vx, kf, kr, M, J):
-    """``J = d x_dot / d x`` at total slopes ``k_f``, ``k_r``."""
-    m, Iz, lf, lr = M.veh[0], M.veh[1], M.veh[2], M.veh[3]
+@njit(cache=True, inline="always")
+def _jacobian(cd, vx, kf, kr, m, Iz, lf, lr, nx, J):
+    """``J = d x_dot / d x`` at total slopes ``k_f``, ``k_r`` (plain arguments: the hot path)."""
     v = vx if vx > V_FLOOR else V_FLOOR
     J[:, :] = 0.0
     J[VY, VY] = -(kf * cd + kr) / (m * v)
     J[VY, R] = -(kf * cd * lf - kr * lr) / (m * v) - v
     J[R, VY] = -(lf * kf * cd - lr * kr) / (Iz * v)
     J[R, R] = -(lf * lf * kf * cd + lr * lr * kr) / (Iz * v)
-    if M.nx == 4:
+    if nx == 4:
         J[E1, VY] = 1.0
         J[E1, E2] = v
         J[E2, R] = 1.0
@@ -413,16 +412,7 @@ def _predict_arrays(dt, delta0, ddot, vx0, ax, kappa0, kdot, x, w, ups, sig, veh
         kf, kr = _rhs_arrays(x, delta, cd, v0, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp,
                              ht, k1, True)  # fmt: skip
         # linearised transition over the sub-step: Phi = I + hJ + (hJ)^2/2, Gm = h (I + hJ/2)
-        vj = v0 if v0 > V_FLOOR else V_FLOOR
-        J[:, :] = 0.0
-        J[VY, VY] = -(kf * cd + kr) / (m * vj)
-        J[VY, R] = -(kf * cd * lf - kr * lr) / (m * vj) - vj
-        J[R, VY] = -(lf * kf * cd - lr * kr) / (Iz * vj)
-        J[R, R] = -(lf * lf * kf * cd + lr * lr * kr) / (Iz * vj)
-        if nx == 4:
-            J[E1, VY] = 1.0
-            J[E1, E2] = vj
-            J[E2, R] = 1.0
+        _jacobian(cd, v0, kf, kr, m, Iz, lf, lr, nx, J)
         for i in range(nx):
             for j in range(nx):
                 acc = 0.0
