@@ -396,16 +396,23 @@ def refine(
             chosen = (force_errors[j] * load, w_j.copy(), nis_up)
     fe, w, nis = chosen
     observer.set_force_error(fe)
+    fit = _final_fit(observer, sensors, w, Lam, fit_from, gate, all_costs, iters)
+    fit.force_error = fe
+    fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe}
+    return fit
+
+
+def _final_fit(observer, sensors, w, Lam, fit_from, gate, costs, iterations) -> OfflineFit:
+    """The final pass at the fitted weights (trace, scores, normal equations) as an :class:`OfflineFit`;
+    the observer is left holding the weights and their covariance."""
     acc, trace = _pass(observer, sensors, w, fit_from, gate, final=True)
     A = acc.hess + Lam
     A = 0.5 * (A + A.T)
     cov = np.linalg.inv(A)
     observer.reset(weights=w)
-    observer._state.pw[:] = cov  # the observer now holds the refined curve and its covariance
-    fit = OfflineFit(w, A, Lam, cov, trace, all_costs, iters, int(acc.stats[1]), scores=trace.meta.pop("scores", None))
+    observer._state.pw[:] = cov
+    fit = OfflineFit(w, A, Lam, cov, trace, costs, iterations, int(acc.stats[1]), scores=trace.meta.pop("scores", None))
     fit.data_cost, fit.data_grad = float(acc.stats[0]), acc.grad.copy()
-    fit.force_error = fe
-    fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe}
     fit.nis_per_dof = _nis_per_dof(acc)
     return fit
 
@@ -490,20 +497,11 @@ def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: Off
     t = np.asarray(sensors["t"], dtype=float)
     fit_from = float(t[0]) + observer.settle_s
     w, _, costs, it = _gauss_newton(observer, sensors, w, w0, Lam, lo, hi, fit_from, gate, max_iter, tol, min_decrease)
-    acc, trace = _pass(observer, sensors, w, fit_from, gate, final=True)
-    A = acc.hess + Lam
-    A = 0.5 * (A + A.T)
-    cov = np.linalg.inv(A)
-    observer.reset(weights=w)
-    observer._state.pw[:] = cov
-    new = OfflineFit(w, A, Lam, cov, trace, list(fit.cost) + costs, fit.iterations + it, int(acc.stats[1]),
-                     scores=trace.meta.pop("scores", None))  # fmt: skip
-    new.data_cost, new.data_grad = float(acc.stats[0]), acc.grad.copy()
+    new = _final_fit(observer, sensors, w, Lam, fit_from, gate, list(fit.cost) + costs, fit.iterations + it)
     new.force_error = fit.force_error
     new.force_error_calibration = fit.force_error_calibration
     new.prior_alternatives = getattr(fit, "prior_alternatives", [])
     new.hold_alternatives = getattr(fit, "hold_alternatives", [])
-    new.nis_per_dof = _nis_per_dof(acc)
     return new, info
 
 
