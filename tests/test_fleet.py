@@ -245,7 +245,9 @@ def test_multi_node_kill_loses_no_result(tmp_path):
     r = json.loads(line[0][6:])
     assert r["killed"] and r["recorded_before_kill"] >= 3
     assert r["lost"] == 0 and r["ok"] == 10 and r["failed"] == 0 and r["stored_records"] == 10
-    assert r["results_after_kill_from_killed_node"] == 0  # the dead node's unfinished tasks ran elsewhere
+    # the dead node finishes nothing after the kill: its unfinished tasks ran elsewhere (a result it finished
+    # just before dying may still reach the driver after the kill, which is why collection time is not the test)
+    assert r["finished_after_kill_on_killed_node"] == 0
 
 
 # -- agents/train.py: several seeds as tasks of the same runner, resumable ---------------------

@@ -25,7 +25,8 @@ def _work(item: tuple[int, float]) -> dict:
     time.sleep(seconds)
     import ray
 
-    return {"item": i, "square": i * i, "node": ray.get_runtime_context().get_node_id(), "pid": os.getpid()}
+    return {"item": i, "square": i * i, "node": ray.get_runtime_context().get_node_id(), "pid": os.getpid(),
+            "finished_at": time.time()}  # fmt: skip
 
 
 def kill_node_run(store: str | Path, n_items: int = 12, task_s: float = 1.0, worker_nodes: int = 2,
@@ -53,6 +54,8 @@ def kill_node_run(store: str | Path, n_items: int = 12, task_s: float = 1.0, wor
         ``items``, ``ok``, ``failed``, ``stored_records`` (lines in the store), ``lost``
         (results recorded before the kill that are missing afterwards: must be 0),
         ``killed_node``, ``results_from_killed_node`` (recorded before it died),
+        ``collected_after_kill_from_killed_node`` (finished by the victim before it died but
+        collected after the kill: legitimate), ``finished_after_kill_on_killed_node`` (must be 0),
         ``recorded_before_kill``, ``wall_s`` and the per-item results.
     """
     from ray.cluster_utils import Cluster
@@ -65,7 +68,7 @@ def kill_node_run(store: str | Path, n_items: int = 12, task_s: float = 1.0, wor
         victim = nodes[0]
         victim_id = victim.node_id
         before: list = []
-        state = {"killed_at": None}
+        state = {"killed_at": None, "killed_wall": None}
 
         def on_result(rec) -> None:
             if state["killed_at"] is None and rec.status == "ok":
@@ -73,6 +76,7 @@ def kill_node_run(store: str | Path, n_items: int = 12, task_s: float = 1.0, wor
                 if len(before) >= kill_after:
                     cluster.remove_node(victim, allow_graceful=False)
                     state["killed_at"] = time.perf_counter()
+                    state["killed_wall"] = time.time()  # the node is dead from here on
 
         t0 = time.perf_counter()
         results = run_items(_work, [(i, task_s) for i in range(n_items)], keys=[f"item{i:03d}" for i in range(n_items)],
@@ -94,9 +98,14 @@ def kill_node_run(store: str | Path, n_items: int = 12, task_s: float = 1.0, wor
         "killed": state["killed_at"] is not None,
         "killed_node": victim_id,
         "results_from_killed_node": sum(1 for r in before if isinstance(r.result, dict) and r.result.get("node") == victim_id),
-        "results_after_kill_from_killed_node": sum(
+        # a task the victim finished just before it died can reach the driver after the kill: legitimate;
+        # a result the victim *finished* after it was killed would mean the kill did not happen
+        "collected_after_kill_from_killed_node": sum(
             1 for r in results if r.key not in {b.key for b in before} and isinstance(r.result, dict)
             and r.result.get("node") == victim_id),
+        "finished_after_kill_on_killed_node": sum(
+            1 for r in results if isinstance(r.result, dict) and r.result.get("node") == victim_id
+            and state["killed_wall"] is not None and r.result.get("finished_at", 0.0) > state["killed_wall"]),
         "nodes_used": len({r.result.get("node") for r in results if isinstance(r.result, dict)}),
         "wall_s": wall,
         "task_s": task_s,
