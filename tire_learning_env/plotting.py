@@ -21,7 +21,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
-from .io import _umask_mode  # noqa: E402
+from .io.writers import umask_mode  # noqa: E402
 
 __all__ = [
     "save_figure",
@@ -49,7 +49,7 @@ def save_figure(fig, path: str | Path | None, dpi: int = 110):
         os.close(fd)
         try:
             fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
-            os.chmod(tmp, _umask_mode())
+            os.chmod(tmp, umask_mode())
             os.replace(tmp, path)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
