@@ -284,36 +284,45 @@ def guard_steering(delta, delta_prev, guard):
     return delta
 
 
+#: Log columns of the true error state, in ``S_E1..S_E2_DOT`` order (written before the step).
+_TRUE_STATE_COLUMNS = (LOG_TRUE_E1, LOG_TRUE_E1_DOT, LOG_TRUE_E2, LOG_TRUE_E2_DOT)
+#: Log columns :func:`record_tick` writes, in the order of its value arguments (``t`` .. ``s``).
+_TICK_COLUMNS = (
+    LOG_T, LOG_DELTA, LOG_VX, LOG_AX, LOG_KAPPA, LOG_PSI_DOT_DES, LOG_PSI_DDOT_DES, LOG_E1, LOG_E2,
+    LOG_YAW_RATE, LOG_AY, LOG_ALPHA_F, LOG_ALPHA_R, LOG_FYF, LOG_FYR, LOG_S,
+)  # fmt: skip
+
+
 @njit(cache=True, inline="always")
 def record_true_state(out, j, state):
     """Write the true error state ``state[:4]`` (before the step) into row ``j`` of a tick log."""
-    out[j, LOG_TRUE_E1] = state[S_E1]
-    out[j, LOG_TRUE_E1_DOT] = state[S_E1_DOT]
-    out[j, LOG_TRUE_E2] = state[S_E2]
-    out[j, LOG_TRUE_E2_DOT] = state[S_E2_DOT]
+    for k in range(len(_TRUE_STATE_COLUMNS)):
+        out[j, _TRUE_STATE_COLUMNS[k]] = state[S_E1 + k]
 
 
 @njit(cache=True, inline="always")
 def record_tick(out, j, t, delta, vx, ax, kappa, p0, q0, delivered, f1, f2, r, ay, af, ar, Fyf, Fyr, s):
     """Fill row ``j`` of a tick log (:data:`LOG_COLUMNS`) except the true state (written before
     the step, :func:`record_true_state`); camera columns are NaN when no frame was delivered.
-    The one row writer of the compiled and the Python tick loops."""
-    out[j, LOG_T] = t
-    out[j, LOG_DELTA] = delta
-    out[j, LOG_VX] = vx
-    out[j, LOG_AX] = ax
-    out[j, LOG_KAPPA] = kappa
-    out[j, LOG_PSI_DOT_DES] = p0
-    out[j, LOG_PSI_DDOT_DES] = q0
-    out[j, LOG_E1] = f1 if delivered else math.nan
-    out[j, LOG_E2] = f2 if delivered else math.nan
-    out[j, LOG_YAW_RATE] = r
-    out[j, LOG_AY] = ay
-    out[j, LOG_ALPHA_F] = af
-    out[j, LOG_ALPHA_R] = ar
-    out[j, LOG_FYF] = Fyf
-    out[j, LOG_FYR] = Fyr
-    out[j, LOG_S] = s
+    The one row writer of the compiled and the Python tick loops (every value a float)."""
+    e1 = f1 if delivered else math.nan
+    e2 = f2 if delivered else math.nan
+    values = (t, delta, vx, ax, kappa, p0, q0, e1, e2, r, ay, af, ar, Fyf, Fyr, s)
+    for k in range(len(_TICK_COLUMNS)):
+        out[j, _TICK_COLUMNS[k]] = values[k]
+
+
+@njit(cache=True, inline="always")
+def _knot_segment(s, ks):
+    """Index ``i`` of the knot segment ``ks[i] <= s < ks[i + 1]`` (bisection; ``ks[0] < s < ks[-1]``)."""
+    lo, hi = 0, ks.shape[0] - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if ks[mid] <= s:
+            lo = mid
+        else:
+            hi = mid
+    return lo
 
 
 @njit(cache=True, inline="always")
@@ -328,14 +337,8 @@ def knot_lookup(s, ks, kv):
         return kv[0], 0.0
     if s >= ks[n - 1]:
         return kv[n - 1], 0.0
-    lo, hi = 0, n - 1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if ks[mid] <= s:
-            lo = mid
-        else:
-            hi = mid
-    slope = (kv[hi] - kv[lo]) / (ks[hi] - ks[lo])
+    lo = _knot_segment(s, ks)
+    slope = (kv[lo + 1] - kv[lo]) / (ks[lo + 1] - ks[lo])
     return kv[lo] + slope * (s - ks[lo]), slope
 
 
@@ -347,15 +350,9 @@ def _knot_integral(s, ks, kv, cum):
         return kv[0] * (s - ks[0])
     if s >= ks[n - 1]:
         return cum[n - 1] + kv[n - 1] * (s - ks[n - 1])
-    lo, hi = 0, n - 1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if ks[mid] <= s:
-            lo = mid
-        else:
-            hi = mid
+    lo = _knot_segment(s, ks)
     x = s - ks[lo]
-    slope = (kv[hi] - kv[lo]) / (ks[hi] - ks[lo])
+    slope = (kv[lo + 1] - kv[lo]) / (ks[lo + 1] - ks[lo])
     return cum[lo] + kv[lo] * x + 0.5 * slope * x * x
 
 
