@@ -103,6 +103,30 @@ def _acceleration_constraints(velocity, acceleration, p):
     return acceleration
 
 
+@njit(cache=True, inline="always")
+def _zero_if_negative(u):
+    """``u * 0`` when ``u < 0`` (CommonRoad's ``u *= 0``: a negative wheel speed becomes -0.0), else ``u``."""
+    if u < 0.0:
+        return u * 0
+    return u
+
+
+@njit(cache=True, inline="always")
+def _unsprung_roll_moment(F_SL, F_SR, T, F_RA, h_ra, R_w, phi_u, F_zL, F_zR, K_lt, F_yL, F_yR, F_lat, z_u):
+    """Roll moment sum [N m] on one axle's unsprung mass (``sumL_uf`` / ``sumL_ur`` of CommonRoad):
+    suspension forces ``F_SL``, ``F_SR`` on track ``T``, compliant-joint force ``F_RA`` at height
+    ``h_ra``, tire loads and lateral forces, the axle's lateral force ``F_lat`` in the body frame
+    at the unsprung roll angle ``phi_u`` and vertical position ``z_u``."""
+    return (
+        0.5 * F_SR * T
+        - 0.5 * F_SL * T
+        - F_RA * (h_ra - R_w)
+        + F_zL * (R_w * math.sin(phi_u) + 0.5 * T * math.cos(phi_u) - K_lt * F_yL)
+        - F_zR * (-R_w * math.sin(phi_u) + 0.5 * T * math.cos(phi_u) + K_lt * F_yR)
+        - F_lat * (R_w - z_u)
+    )
+
+
 @njit(cache=True)
 def mb_rhs(x, u_steer_rate, u_accel, p, ty, use_lag, f, aux):
     """Right-hand side of CommonRoad's ``vehicle_dynamics_mb`` (29 states), ported.
@@ -146,34 +170,20 @@ def mb_rhs(x, u_steer_rate, u_accel, p, ty, use_lag, f, aux):
     u_w_rf = (x[3] - 0.5 * T_f * x[5]) * math.cos(x[2]) + (x[10] + a * x[5]) * math.sin(x[2])
     u_w_lr = x[3] + 0.5 * T_r * x[5]
     u_w_rr = x[3] - 0.5 * T_r * x[5]
-    if u_w_lf < 0.0:
-        u_w_lf *= 0
-    if u_w_rf < 0.0:
-        u_w_rf *= 0
-    if u_w_lr < 0.0:
-        u_w_lr *= 0
-    if u_w_rr < 0.0:
-        u_w_rr *= 0
+    u_w_lf = _zero_if_negative(u_w_lf)
+    u_w_rf = _zero_if_negative(u_w_rf)
+    u_w_lr = _zero_if_negative(u_w_lr)
+    u_w_rr = _zero_if_negative(u_w_rr)
 
-    # longitudinal slip
+    # longitudinal slip and lateral slip angles (kinematic); both zero below 0.1 m/s
     if abs(x[3]) < 0.1:
-        s_lf = 0.0
-        s_rf = 0.0
-        s_lr = 0.0
-        s_rr = 0.0
+        s_lf = s_rf = s_lr = s_rr = 0.0
+        alpha_LF = alpha_RF = alpha_LR = alpha_RR = 0.0
     else:
         s_lf = 1 - R_w * x[23] / u_w_lf
         s_rf = 1 - R_w * x[24] / u_w_rf
         s_lr = 1 - R_w * x[25] / u_w_lr
         s_rr = 1 - R_w * x[26] / u_w_rr
-
-    # lateral slip angles (kinematic)
-    if abs(x[3]) < 0.1:
-        alpha_LF = 0.0
-        alpha_RF = 0.0
-        alpha_LR = 0.0
-        alpha_RR = 0.0
-    else:
         alpha_LF = math.atan((x[10] + a * x[5] - x[14] * (R_w - x[16])) / (x[3] + 0.5 * T_f * x[5])) - x[2]
         alpha_RF = math.atan((x[10] + a * x[5] - x[14] * (R_w - x[16])) / (x[3] - 0.5 * T_f * x[5])) - x[2]
         alpha_LR = math.atan((x[10] - b * x[5] - x[19] * (R_w - x[21])) / (x[3] + 0.5 * T_r * x[5]))
@@ -292,22 +302,10 @@ def mb_rhs(x, u_steer_rate, u_accel, p, ty, use_lag, f, aux):
 
     # unsprung mass sums
     K_lt = p[MB_KLT]
-    sumL_uf = (
-        0.5 * F_SRF * T_f
-        - 0.5 * F_SLF * T_f
-        - F_RAF * (h_raf - R_w)
-        + F_z_LF * (R_w * math.sin(x[13]) + 0.5 * T_f * math.cos(x[13]) - K_lt * F_y_LF)
-        - F_z_RF * (-R_w * math.sin(x[13]) + 0.5 * T_f * math.cos(x[13]) + K_lt * F_y_RF)
-        - ((F_y_LF + F_y_RF) * c2 + (F_x_LF + F_x_RF) * s2) * (R_w - x[16])
-    )
-    sumL_ur = (
-        0.5 * F_SRR * T_r
-        - 0.5 * F_SLR * T_r
-        - F_RAR * (h_rar - R_w)
-        + F_z_LR * (R_w * math.sin(x[18]) + 0.5 * T_r * math.cos(x[18]) - K_lt * F_y_LR)
-        - F_z_RR * (-R_w * math.sin(x[18]) + 0.5 * T_r * math.cos(x[18]) + K_lt * F_y_RR)
-        - (F_y_LR + F_y_RR) * (R_w - x[21])
-    )
+    sumL_uf = _unsprung_roll_moment(F_SLF, F_SRF, T_f, F_RAF, h_raf, R_w, x[13], F_z_LF, F_z_RF, K_lt, F_y_LF, F_y_RF,
+                                    (F_y_LF + F_y_RF) * c2 + (F_x_LF + F_x_RF) * s2, x[16])  # fmt: skip
+    sumL_ur = _unsprung_roll_moment(F_SLR, F_SRR, T_r, F_RAR, h_rar, R_w, x[18], F_z_LR, F_z_RR, K_lt, F_y_LR, F_y_RR,
+                                    F_y_LR + F_y_RR, x[21])  # fmt: skip
     sumZ_uf = F_z_LF + F_z_RF + F_RAF * math.sin(x[6]) - (F_SLF + F_SRF) * math.cos(x[6])
     sumZ_ur = F_z_LR + F_z_RR + F_RAR * math.sin(x[6]) - (F_SLR + F_SRR) * math.cos(x[6])
     sumY_uf = (F_y_LF + F_y_RF) * c2 + (F_x_LF + F_x_RF) * s2 - F_RAF * math.cos(x[6]) - (F_SLF + F_SRF) * math.sin(x[6])

@@ -34,6 +34,25 @@ def _sign(x):
     return 0.0
 
 
+@njit(cache=True, inline="always")
+def _mf_angle(x, B, C, E):
+    """The Magic Formula's angle ``C atan(B x - E (B x - atan(B x)))`` [rad] (every formula below)."""
+    return C * math.atan(B * x - E * (B * x - math.atan(B * x)))
+
+
+@njit(cache=True, inline="always")
+def _pure_slip_coefficients(gamma, F_z, p_d1, p_d3, p_c1, p_e1, p_k1):
+    """``(B, C, D, E, mu)`` of a pure-slip formula: friction ``mu = p_d1 (1 - p_d3 gamma^2)``,
+    peak ``D = mu F_z`` [N], slip stiffness ``K = F_z p_k1``, ``B = K / (C D)``."""
+    mu = p_d1 * (1 - p_d3 * gamma**2)
+    C = p_c1
+    D = mu * F_z
+    E = p_e1
+    K = F_z * p_k1
+    B = K / (C * D)
+    return B, C, D, E, mu
+
+
 @njit(cache=True)
 def pac_longitudinal(kappa, gamma, F_z, ty):
     """``formula_longitudinal``: pure-slip longitudinal force [N] (CommonRoad, ported)."""
@@ -41,13 +60,8 @@ def pac_longitudinal(kappa, gamma, F_z, ty):
     S_hx = ty[TY_PHX1]
     S_vx = F_z * ty[TY_PVX1]
     kappa_x = kappa + S_hx
-    mu_x = ty[TY_PDX1] * (1 - ty[TY_PDX3] * gamma**2)
-    C_x = ty[TY_PCX1]
-    D_x = mu_x * F_z
-    E_x = ty[TY_PEX1]
-    K_x = F_z * ty[TY_PKX1]
-    B_x = K_x / (C_x * D_x)
-    return D_x * math.sin(C_x * math.atan(B_x * kappa_x - E_x * (B_x * kappa_x - math.atan(B_x * kappa_x))) + S_vx)
+    B_x, C_x, D_x, E_x, _ = _pure_slip_coefficients(gamma, F_z, ty[TY_PDX1], ty[TY_PDX3], ty[TY_PCX1], ty[TY_PEX1], ty[TY_PKX1])
+    return D_x * math.sin(_mf_angle(kappa_x, B_x, C_x, E_x) + S_vx)
 
 
 @njit(cache=True)
@@ -57,13 +71,8 @@ def pac_lateral(alpha, gamma, F_z, ty):
     S_hy = sg * (ty[TY_PHY1] + ty[TY_PHY3] * math.fabs(gamma))
     S_vy = sg * F_z * (ty[TY_PVY1] + ty[TY_PVY3] * math.fabs(gamma))
     alpha_y = alpha + S_hy
-    mu_y = ty[TY_PDY1] * (1 - ty[TY_PDY3] * gamma**2)
-    C_y = ty[TY_PCY1]
-    D_y = mu_y * F_z
-    E_y = ty[TY_PEY1]
-    K_y = F_z * ty[TY_PKY1]
-    B_y = K_y / (C_y * D_y)
-    F_y = D_y * math.sin(C_y * math.atan(B_y * alpha_y - E_y * (B_y * alpha_y - math.atan(B_y * alpha_y)))) + S_vy
+    B_y, C_y, D_y, E_y, mu_y = _pure_slip_coefficients(gamma, F_z, ty[TY_PDY1], ty[TY_PDY3], ty[TY_PCY1], ty[TY_PEY1], ty[TY_PKY1])
+    F_y = D_y * math.sin(_mf_angle(alpha_y, B_y, C_y, E_y)) + S_vy
     return F_y, mu_y
 
 
@@ -75,12 +84,8 @@ def pac_longitudinal_comb(kappa, alpha, F0_x, ty):
     B_xalpha = ty[TY_RBX1] * math.cos(math.atan(ty[TY_RBX2] * kappa))
     C_xalpha = ty[TY_RCX1]
     E_xalpha = ty[TY_REX1]
-    D_xalpha = F0_x / (
-        math.cos(C_xalpha * math.atan(B_xalpha * S_hxalpha - E_xalpha * (B_xalpha * S_hxalpha - math.atan(B_xalpha * S_hxalpha))))
-    )
-    return D_xalpha * math.cos(
-        C_xalpha * math.atan(B_xalpha * alpha_s - E_xalpha * (B_xalpha * alpha_s - math.atan(B_xalpha * alpha_s)))
-    )
+    D_xalpha = F0_x / (math.cos(_mf_angle(S_hxalpha, B_xalpha, C_xalpha, E_xalpha)))
+    return D_xalpha * math.cos(_mf_angle(alpha_s, B_xalpha, C_xalpha, E_xalpha))
 
 
 @njit(cache=True)
@@ -91,14 +96,10 @@ def pac_lateral_comb(kappa, alpha, gamma, mu_y, F_z, F0_y, ty):
     B_ykappa = ty[TY_RBY1] * math.cos(math.atan(ty[TY_RBY2] * (alpha - ty[TY_RBY3])))
     C_ykappa = ty[TY_RCY1]
     E_ykappa = ty[TY_REY1]
-    D_ykappa = F0_y / (
-        math.cos(C_ykappa * math.atan(B_ykappa * S_hykappa - E_ykappa * (B_ykappa * S_hykappa - math.atan(B_ykappa * S_hykappa))))
-    )
+    D_ykappa = F0_y / (math.cos(_mf_angle(S_hykappa, B_ykappa, C_ykappa, E_ykappa)))
     D_vykappa = mu_y * F_z * (ty[TY_RVY1] + ty[TY_RVY3] * gamma) * math.cos(math.atan(ty[TY_RVY4] * alpha))
     S_vykappa = D_vykappa * math.sin(ty[TY_RVY5] * math.atan(ty[TY_RVY6] * kappa))
-    return D_ykappa * math.cos(
-        C_ykappa * math.atan(B_ykappa * kappa_s - E_ykappa * (B_ykappa * kappa_s - math.atan(B_ykappa * kappa_s)))
-    ) + S_vykappa
+    return D_ykappa * math.cos(_mf_angle(kappa_s, B_ykappa, C_ykappa, E_ykappa)) + S_vykappa
 
 
 @njit(cache=True)
