@@ -126,8 +126,8 @@ def test_end_of_step_truth_matches_the_last_logged_tick():
 
 @pytest.mark.parametrize("env_id", ["TireLearning-Cornering-v0", "TireLearning-Highway-v0"])
 def test_set_plant_swaps_the_truth_vehicle_for_the_next_episode(env_id):
-    """``set_plant`` is how a wrapper (the excitation task's truth randomisation) changes the truth:
-    the env and its simulator step the new plant, and its ground truth reaches ``info``."""
+    """``set_plant`` changes the truth between episodes: the env and its simulator step the new
+    plant, and its ground truth reaches ``info``."""
     from tire_learning_env.dynamics import BicyclePlant
     from tire_learning_env.tires import axle_tires
 
@@ -141,3 +141,36 @@ def test_set_plant_swaps_the_truth_vehicle_for_the_next_episode(env_id):
     np.testing.assert_array_equal(info["true_state"], np.asarray(plant.state[:4]))
     # the linear half-stiffness truth: force = 2 (C/2) alpha on the front axle
     assert info["true_force"][0] == pytest.approx(soft.Cf * 2 * info["true_slip"][0], rel=1e-9)
+
+
+@pytest.mark.parametrize("env_id", ["TireLearning-Cornering-v0", "TireLearning-Highway-v0"])
+def test_plant_sampler_draws_the_truth_from_the_reset_seed(env_id):
+    """A ``plant_sampler`` (rng -> plant) is called at every reset with the env's truth generator:
+    seeded by the reset's seed (the same truth for the same seed, whatever ran before), continued
+    by a reset without one; the env steps the plant it returned."""
+    from tire_learning_env.dynamics import BicyclePlant
+    from tire_learning_env.tires import axle_tires
+
+    drawn = []
+
+    def sampler(rng):
+        scale = float(rng.uniform(0.5, 1.5))
+        v = env.vehicle
+        plant = BicyclePlant(v, *axle_tires(v.replace(Cf=scale * v.Cf, Cr=scale * v.Cr), "linear"))
+        drawn.append((scale, plant))
+        return plant
+
+    kwargs = {"config": {"vehicles_count": 0}} if "Highway" in env_id else {}
+    env = gym.make(env_id, plant_sampler=sampler, **kwargs).unwrapped
+    env.reset(seed=3)
+    env.reset()  # continues the seed-3 stream
+    env.reset(seed=4)
+    env.reset(seed=3)
+    scales = [s for s, _ in drawn]
+    assert scales[0] == scales[3] and len(set(scales[:3])) == 3
+    assert env.plant is drawn[-1][1]
+    _, _, _, _, info = env.step(np.array([0.02], dtype=np.float32))
+    np.testing.assert_array_equal(info["true_state"], np.asarray(drawn[-1][1].state[:4]))
+    assert info["true_force"][0] == pytest.approx(scales[-1] * env.vehicle.Cf * 2 * info["true_slip"][0], rel=1e-9)
+    with pytest.raises(ParameterError, match="plant_sampler"):
+        env.set_plant_sampler("not callable")

@@ -6,6 +6,11 @@
 the order it needs (the traffic scenes build their road network before the default vehicle,
 whose speed is the scene's cruise speed); it overrides hooks such as ``_observation`` and
 ``_info_now`` as highway-env's scenes override ``_reward``.
+
+The truth vehicle is built once (``plant_factory(vehicle)``, default a :class:`BicyclePlant`)
+and, with a ``plant_sampler`` (``rng -> plant``, e.g. the excitation task's truth
+randomisation), drawn anew at every :meth:`~TireLearningEnv.reset` from the env's own truth
+generator (:meth:`TireLearningEnv.truth_rng`), so no wrapper has to swap the plant.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ __all__ = [
     "PARAM_TYPES",
     "observation_bounds",
     "whole_rate_ratio",
+    "TRUTH_SEED_TAG",
 ]
 
 #: The base observation, in order (every env; the traffic scenes may append traffic features).
@@ -67,6 +73,10 @@ COMMON_CONFIG_KEYS = (
     "departure_threshold",
     "initial_state_std",
 )
+
+#: Mixed into a reset's seed for the truth generator of a ``plant_sampler`` (:meth:`TireLearningEnv.truth_rng`):
+#: the truth drawn for a seed is independent of the env's own noise, and the same in every env.
+TRUTH_SEED_TAG = 0x7E1E
 
 #: Config entry -> the parameter dataclass it is coerced to (an instance or a dict).
 PARAM_TYPES: dict[str, type] = {
@@ -108,9 +118,9 @@ class TireLearningEnv(gym.Env):
     Attributes set by the ``_init_*`` steps: ``vehicle``, ``tire_params``, ``camera_params``,
     ``driver_params``, ``effects`` (:meth:`_init_params`); ``physics_rate``, ``policy_rate``,
     ``ticks_per_step`` (:meth:`_init_rates`); ``action_mode``, ``max_steering_offset``,
-    ``departure_threshold``, ``initial_state_std`` (:meth:`_init_task`); ``plant``
-    (:meth:`_init_plant`); ``action_space``, ``observation_space`` (:meth:`_init_spaces`);
-    ``render_mode`` (:meth:`_init_render_mode`).
+    ``departure_threshold``, ``initial_state_std`` (:meth:`_init_task`); ``plant``,
+    ``plant_sampler`` (:meth:`_init_plant`); ``action_space``, ``observation_space``
+    (:meth:`_init_spaces`); ``render_mode`` (:meth:`_init_render_mode`).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
@@ -119,6 +129,11 @@ class TireLearningEnv(gym.Env):
     _CONFIG_KEYS: tuple[str, ...] = ()
 
     # -- construction steps ----------------------------------------------------------------
+    def _arguments(self, given: Mapping[str, Any], config: Mapping[str, Any] | None) -> dict[str, Any]:
+        """The constructor's arguments: the entries of ``given`` (its ``locals()``) that are
+        :attr:`_CONFIG_KEYS`, updated by ``config`` (:meth:`_merge_config`)."""
+        return self._merge_config({k: v for k, v in given.items() if k in self._CONFIG_KEYS}, config)
+
     def _merge_config(self, args: dict[str, Any], config: Mapping[str, Any] | None, allowed=None) -> dict[str, Any]:
         """``args`` updated by ``config``; an unknown key raises :class:`ParameterError` naming it."""
         if config is not None:
@@ -171,10 +186,16 @@ class TireLearningEnv(gym.Env):
         self.initial_state_std = np.zeros(4) if std is None else np.asarray(std, dtype=float).reshape(4)
 
     def _init_plant(
-        self, args: Mapping[str, Any], plant_factory: Callable[[VehicleParams], Plant] | None = None
+        self,
+        args: Mapping[str, Any],
+        plant_factory: Callable[[VehicleParams], Plant] | None = None,
+        plant_sampler: Callable[[np.random.Generator], Plant] | None = None,
     ) -> Plant:
         """The truth plant: ``plant_factory(vehicle)``, else a :class:`BicyclePlant` on the
-        ``tires`` pair or on ``axle_tires(vehicle, tire_model, tire_params)``."""
+        ``tires`` pair or on ``axle_tires(vehicle, tire_model, tire_params)``; and the
+        per-episode ``plant_sampler`` (:meth:`set_plant_sampler`)."""
+        self._truth_rng: np.random.Generator | None = None
+        self.set_plant_sampler(plant_sampler)
         if plant_factory is not None:
             plant = plant_factory(self.vehicle)
         else:
@@ -206,9 +227,34 @@ class TireLearningEnv(gym.Env):
         self.metadata = dict(self.metadata, render_fps=int(round(self.policy_rate)))
 
     def set_plant(self, plant: Plant) -> None:
-        """Use ``plant`` as the truth vehicle from the next :meth:`reset` on (e.g. a randomised
-        truth per episode). Subclasses that hand the plant on (a simulator) override this."""
+        """Use ``plant`` as the truth vehicle from the next :meth:`reset` on. Subclasses that hand
+        the plant on (a simulator) override this."""
         self.plant = plant
+
+    def set_plant_sampler(self, sampler: Callable[[np.random.Generator], Plant] | None) -> None:
+        """Draw the truth vehicle at every :meth:`reset` as ``sampler(rng)`` (``None``: keep the plant).
+
+        ``rng`` is :meth:`truth_rng`: seeded by the reset's seed (mixed with
+        :data:`TRUTH_SEED_TAG`), continued by a reset without one, so the truth of a seed does
+        not depend on the env's other random streams.
+        """
+        if sampler is not None and not callable(sampler):
+            raise ParameterError(f"plant_sampler must be a callable rng -> plant, got {type(sampler).__name__}")
+        self.plant_sampler = sampler
+
+    def truth_rng(self, seed: int | None) -> np.random.Generator:
+        """The truth generator of a reset with ``seed``: a new one for a seed, else the current one
+        (a fresh unseeded one the first time)."""
+        if seed is not None:
+            self._truth_rng = np.random.default_rng(np.random.SeedSequence([int(seed), TRUTH_SEED_TAG]))
+        elif self._truth_rng is None:
+            self._truth_rng = np.random.default_rng()
+        return self._truth_rng
+
+    def _sample_plant(self, seed: int | None) -> None:
+        """At the start of :meth:`reset`: the episode's truth vehicle from the ``plant_sampler``, if any."""
+        if self.plant_sampler is not None:
+            self.set_plant(self.plant_sampler(self.truth_rng(seed)))
 
     # -- shared step pieces --------------------------------------------------------------------
     @staticmethod

@@ -6,7 +6,7 @@ from typing import Any, Mapping
 
 from ..high_order.params import HighOrderConfig, MultiBodyParams, bmw_320i
 from ..high_order.plant import MultiBodyPlant, equivalent_bicycle
-from ..params import CameraParams, DriverParams, RoadParams, VehicleParams, coerce_params
+from ..params import VehicleParams, coerce_params
 from ..roads import Road, make_road
 from .lane_keeping import LaneKeepingEnv
 
@@ -30,8 +30,9 @@ class HighOrderLaneKeepingEnv(LaneKeepingEnv):
 
     ## Arguments
 
-    As ``LaneKeepingEnv`` without ``tire``, ``tire_model``, ``tires`` and ``effects`` (the
-    tires are part of the multi-body model), plus ``high_order`` (a
+    As ``LaneKeepingEnv`` (keyword arguments after ``high_order_config``) without ``tire``,
+    ``tire_model``, ``tires``, ``effects`` and ``plant_factory`` (the tires are part of the
+    multi-body model; ``TypeError``), plus ``high_order`` (a
     :class:`~tire_learning_env.high_order.MultiBodyParams` or dict) and ``high_order_config``
     (a :class:`~tire_learning_env.high_order.HighOrderConfig` or dict). ``vehicle`` is the
     nominal bicycle the built-in driver and estimators assume (default: the plant's
@@ -47,49 +48,33 @@ class HighOrderLaneKeepingEnv(LaneKeepingEnv):
         k for k in LaneKeepingEnv._CONFIG_KEYS if k not in ("tire", "tire_model", "tires", "effects")
     ) + ("high_order", "high_order_config")
 
+    #: ``LaneKeepingEnv`` arguments of the bicycle's truth tires, refused here.
+    _BICYCLE_ONLY = ("tire", "tire_model", "tires", "effects", "plant_factory")
+
     def __init__(
         self,
         road: str | Road = "study1",
         high_order: MultiBodyParams | Mapping | None = None,
         high_order_config: HighOrderConfig | Mapping | None = None,
-        vehicle: VehicleParams | Mapping | None = None,
-        camera: CameraParams | Mapping | None = None,
-        driver: DriverParams | Mapping | None = None,
-        road_params: RoadParams | Mapping | None = None,
-        physics_rate: float = 1000.0,
-        policy_rate: float = 20.0,
-        action_mode: str = "offset",
-        max_steering_offset: float = 0.05,
-        departure_threshold: float | None = None,
-        initial_state_std: tuple[float, float, float, float] | None = None,
         render_mode: str | None = None,
         config: Mapping[str, Any] | None = None,
+        **kwargs: Any,
     ) -> None:
-        args = dict(
-            road=road,
-            high_order=high_order,
-            high_order_config=high_order_config,
-            vehicle=vehicle,
-            camera=camera,
-            driver=driver,
-            road_params=road_params,
-            physics_rate=physics_rate,
-            policy_rate=policy_rate,
-            action_mode=action_mode,
-            max_steering_offset=max_steering_offset,
-            departure_threshold=departure_threshold,
-            initial_state_std=initial_state_std,
-        )
-        args = self._merge_config(args, config)
+        rejected = [k for k in self._BICYCLE_ONLY if k in kwargs]
+        if rejected:
+            raise TypeError(
+                f"{type(self).__name__} got unexpected keyword argument(s) {rejected}: the multi-body model has its own tires"
+            )
+        args = self._merge_config({"road": road, "high_order": high_order, "high_order_config": high_order_config, **kwargs}, config)
         self.high_order_params: MultiBodyParams = (
             coerce_params(MultiBodyParams, args.pop("high_order"), "high_order") or bmw_320i()
         )
         self.high_order_config: HighOrderConfig = (
             coerce_params(HighOrderConfig, args.pop("high_order_config"), "high_order_config") or HighOrderConfig()
         )
-        rp = self._params("road_params", args["road_params"])
+        rp = self._params("road_params", args.get("road_params"))
         road_obj = make_road(args["road"], rp)
-        if args["vehicle"] is None:
+        if args.get("vehicle") is None:
             args["vehicle"] = equivalent_bicycle(self.high_order_params)
         params, cfg = self.high_order_params, self.high_order_config
 

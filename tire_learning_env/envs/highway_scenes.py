@@ -116,7 +116,9 @@ class HighwayTrafficEnv(TrafficEnv):
     ``render_mode`` (``"rgb_array"``), ``config`` (a dict of any of these; unknown keys
     raise ``ParameterError``) and ``plant_factory`` (``VehicleParams -> Plant``: any plant
     of the :class:`~tire_learning_env.simulation.Plant` protocol whose ``state[:4]`` is the
-    error state; plants without compiled parameters run in the Python twin of the loop).
+    error state; plants without compiled parameters run in the Python twin of the loop) and
+    ``plant_sampler`` (``np.random.Generator -> Plant``: a truth vehicle drawn at every reset,
+    :meth:`~tire_learning_env.envs._base.TireLearningEnv.set_plant_sampler`).
     The default vehicle is the paper's sedan with ``vx = target_speed``.
 
     ## Version History

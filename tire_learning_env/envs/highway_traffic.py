@@ -101,6 +101,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         render_mode: str | None = None,
         config: Mapping[str, Any] | None = None,
         plant_factory: Callable[[VehicleParams], Plant] | None = None,
+        plant_sampler: Callable[[np.random.Generator], Plant] | None = None,
         **kwargs: Any,
     ) -> None:
         allowed = self._COMMON_KEYS + self._SCENE_KEYS
@@ -154,7 +155,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         self.lane_width = float(lane_width)
         self._init_task(args, lane_width=self.lane_width)
 
-        self._init_plant(args, plant_factory)
+        self._init_plant(args, plant_factory, plant_sampler)
         self._compiled = hasattr(self.plant, "kernel_params")
         self.camera = Camera(self.camera_params, self.dt)
         self.driver = LaneKeepingDriver(self.driver_params, self.vehicle)
@@ -189,6 +190,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
     # -- gymnasium API --------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        self._sample_plant(seed)
         cam_seed, traffic_seed = self.np_random.integers(0, 2**63 - 1, size=2)
         self._traffic_rng = np.random.default_rng(int(traffic_seed))
         self.road = HighwayRoad(network=self.network, np_random=self._traffic_rng, record_history=False)

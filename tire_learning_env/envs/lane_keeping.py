@@ -88,7 +88,11 @@ class LaneKeepingEnv(TireLearningEnv):
     ``camera``, ``driver``, ``effects``, ``road_params`` (dataclass or dict),
     ``physics_rate`` [Hz], ``policy_rate`` [Hz], ``action_mode``, ``max_steering_offset``
     [rad], ``departure_threshold`` [m], ``initial_state_std`` (4,), ``render_mode``,
-    ``config`` (a dict of any of these; unknown keys raise ``ParameterError``).
+    ``config`` (a dict of any of these; unknown keys raise ``ParameterError``);
+    ``plant_factory`` (``VehicleParams -> Plant``: the truth vehicle, built once) and
+    ``plant_sampler`` (``np.random.Generator -> Plant``: a truth vehicle drawn at every reset
+    from the seed, e.g. the excitation task's truth randomisation; see
+    :meth:`~tire_learning_env.envs._base.TireLearningEnv.set_plant_sampler`).
 
     ## Version History
 
@@ -119,31 +123,15 @@ class LaneKeepingEnv(TireLearningEnv):
         render_mode: str | None = None,
         config: Mapping[str, Any] | None = None,
         plant_factory: Callable[[VehicleParams], Plant] | None = None,
+        plant_sampler: Callable[[np.random.Generator], Plant] | None = None,
     ) -> None:
-        args = dict(
-            road=road,
-            vehicle=vehicle,
-            tire=tire,
-            tire_model=tire_model,
-            tires=tires,
-            camera=camera,
-            driver=driver,
-            effects=effects,
-            road_params=road_params,
-            physics_rate=physics_rate,
-            policy_rate=policy_rate,
-            action_mode=action_mode,
-            max_steering_offset=max_steering_offset,
-            departure_threshold=departure_threshold,
-            initial_state_std=initial_state_std,
-        )
-        args = self._merge_config(args, config)
+        args = self._arguments(locals(), config)
         self._init_params(args)
         self.road_params: RoadParams = self._params("road_params", args["road_params"])
         self.road: Road = make_road(args["road"], self.road_params)
         self._init_rates(args["physics_rate"], args["policy_rate"])
         self._init_task(args, lane_width=self.road.lane_width)
-        plant = self._init_plant(args, plant_factory)
+        plant = self._init_plant(args, plant_factory, plant_sampler)
         self.sim = Simulator(
             plant, self.road, self.camera_params, self.driver_params, self.vehicle, 1.0 / self.physics_rate
         )
@@ -155,6 +143,7 @@ class LaneKeepingEnv(TireLearningEnv):
     # -- gymnasium API --------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        self._sample_plant(seed)
         xi0 = self.initial_state_std * self.np_random.standard_normal(4)
         if options and "initial_state" in options:
             xi0 = np.asarray(options["initial_state"], dtype=float).reshape(4)

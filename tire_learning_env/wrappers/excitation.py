@@ -28,6 +28,7 @@ from .excitation_task import (
     INFORMATION_EDGES,
     ExcitationConfig,
     TruthRandomization,
+    TruthSampler,
     target_functionals,
     target_slip_range,
 )
@@ -115,8 +116,9 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         The observer running inside a tire-learning env.
     config : ExcitationConfig or dict, optional
     randomization : TruthRandomization or dict, optional
-        Per-episode truth tires (``None``: the env's own fixed truth), handed to the base env
-        through its ``set_plant`` (:class:`~tire_learning_env.envs._base.TireLearningEnv`).
+        Per-episode truth tires (``None``: the env's own fixed truth): the base env draws them at
+        each reset from the seed, through the :class:`~.excitation_task.TruthSampler` given to its
+        ``set_plant_sampler`` (:class:`~tire_learning_env.envs._base.TireLearningEnv`).
     record : bool
         Keep per-step records for :meth:`episode_metrics` (weights, slips, limits).
     info_logs : bool
@@ -150,8 +152,13 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.observer = env.observer
         base = env.unwrapped
         self.vehicle: VehicleParams = self.observer.vehicle
-        if self.randomization is not None and not hasattr(base, "plant"):
-            raise TypeError(f"{type(base).__name__} does not expose its truth plant; truth randomisation needs one")
+        self._sampler: TruthSampler | None = None
+        if self.randomization is not None:
+            if not hasattr(base, "set_plant_sampler"):
+                raise TypeError(f"{type(base).__name__} takes no plant sampler; truth randomisation needs one")
+            # the env draws the truth at each reset from its seed (TireLearningEnv.set_plant_sampler)
+            self._sampler = self.randomization.sampler(self.vehicle, getattr(base, "effects", None))
+            base.set_plant_sampler(self._sampler)
         self.target: tuple[float, float] = self.config.target(self.vehicle)
         self.target_functionals, self.target_names = target_functionals(
             self.observer.basis, self.vehicle, self.target, self.observer.n_weights
@@ -160,7 +167,6 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         n_obs = len(EXCITATION_OBSERVATION_NAMES) + len(self.target_names)
         self.observation_space = spaces.Box(-_OBS_BOUND, _OBS_BOUND, shape=(n_obs,), dtype=np.float32)
-        self._truth_rng: np.random.Generator | None = None
         self.truth_draw: dict[str, float] | None = None
         self.safety_filter: LateralAccelerationFilter | None = None
         if self.config.safety_filter:
@@ -217,16 +223,9 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     # -- gymnasium API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        if self.randomization is not None:
-            if seed is not None:
-                self._truth_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x7E1E]))
-            elif self._truth_rng is None:
-                self._truth_rng = np.random.default_rng()
-            self.truth_draw = self.randomization.draw(self._truth_rng)
-            base = self.env.unwrapped
-            plant = self.randomization.build_plant(self.vehicle, self.truth_draw, getattr(base.plant, "effects", None))
-            base.set_plant(plant)
         obs, info = self.env.reset(seed=seed, options=options)
+        if self._sampler is not None:
+            self.truth_draw = self._sampler.last_draw
         self._p0_diag = np.diag(self.target_covariance()).copy()
         self._j0 = self._j = self.information()
         self._e0 = self._e = self.truth_error() if self.config.reward == "truth_nrmse" else math.nan

@@ -119,6 +119,7 @@ from ..tires import PacejkaTire
 __all__ = [
     "ExcitationConfig",
     "TruthRandomization",
+    "TruthSampler",
     "EXCITATION_CAMERA",
     "target_slip_range",
     "target_functionals",
@@ -405,3 +406,39 @@ class TruthRandomization(_Params):
         front = PacejkaTire.for_axle(scaled, tire, "front")
         rear = PacejkaTire.for_axle(scaled, tire, "rear")
         return BicyclePlant(vehicle, front, rear, effects)
+
+    def sampler(self, vehicle: VehicleParams, effects=None) -> "TruthSampler":
+        """An env's ``plant_sampler`` drawing one truth per reset (:class:`TruthSampler`)."""
+        return TruthSampler(self, vehicle, effects)
+
+
+class TruthSampler:
+    """``rng -> BicyclePlant``: a new truth of a :class:`TruthRandomization` per call.
+
+    Handed to a tire-learning env as its ``plant_sampler``
+    (:meth:`~tire_learning_env.envs._base.TireLearningEnv.set_plant_sampler`), which calls it
+    at every reset with its truth generator.
+
+    Parameters
+    ----------
+    randomization : TruthRandomization
+    vehicle : VehicleParams
+        Nominal vehicle (everything but the tires).
+    effects : PlantEffects, optional
+        Hidden effects of the truth plant.
+
+    Attributes
+    ----------
+    last_draw : dict or None
+        The latest draw (:meth:`TruthRandomization.draw`), ``None`` before the first call.
+    """
+
+    def __init__(self, randomization: TruthRandomization, vehicle: VehicleParams, effects=None) -> None:
+        self.randomization = randomization
+        self.vehicle = vehicle
+        self.effects = effects
+        self.last_draw: dict[str, float] | None = None
+
+    def __call__(self, rng: np.random.Generator) -> BicyclePlant:
+        self.last_draw = self.randomization.draw(rng)
+        return self.randomization.build_plant(self.vehicle, self.last_draw, self.effects)
