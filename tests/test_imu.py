@@ -111,6 +111,25 @@ def test_mode_probabilities_follow_the_smaller_prediction_error_and_the_mixture_
     assert np.mean(mu2[500:2000, 0]) > 0.8
 
 
+def test_smoothed_mode_probabilities_use_the_evidence_after_each_row():
+    rng = np.random.default_rng(1)
+    n = 4000
+    t = np.arange(n) * 0.01
+    small, large = rng.normal(0, 1.0, (n, 2)), rng.normal(0, 1.5, (n, 2))
+    a = np.where((t < 20)[:, None], small, large)
+    b = np.where((t < 20)[:, None], large, small)
+    mu_f, _ = mode_probabilities(t, [a, b])
+    mu_s, var = mode_probabilities(t, [a, b], smooth=True)
+    assert np.allclose(mu_s.sum(axis=1), 1.0) and np.isfinite(var).all()
+    # the filter spends its warm-up at the prior; the smoother knows from the rows that follow
+    assert np.all(mu_f[:100, 0] == 0.5) and np.mean(mu_s[:100, 0]) > 0.9
+    # the switch at 20 s is found from both sides: no lag behind it
+    assert np.mean(mu_s[1800:1990, 0]) > 0.9 and np.mean(mu_s[2010:2200, 1]) > 0.9
+    assert np.mean(mu_s[2010:2200, 1]) > np.mean(mu_f[2010:2200, 1])
+    # the last row has no later evidence: the smoothed and filtered probabilities agree there
+    assert mu_s[-1, 0] == pytest.approx(mu_f[-1, 0], abs=0.05)
+
+
 def test_blend_of_two_traces_lies_between_them(drive):
     sensors, truth, _ = drive
     rows = {k: sensors[k] for k in ("t", "delta", "vx", "ay", "yaw_rate")}

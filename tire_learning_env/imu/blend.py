@@ -92,9 +92,10 @@ class BlendParams(_Params):
 
 
 @njit(cache=True)
-def _mode_kernel(t, nu, tau, sojourn, warmup, mu0, out_mu, out_var):
-    """``nu`` (M, n, C) innovations (NaN: none); fills ``out_mu`` (n, M) and the predictive
-    innovation variances ``out_var`` (M, n, C) used at each row."""
+def _mode_kernel(t, nu, tau, sojourn, warmup, mu0, out_mu, out_var, out_ll):
+    """``nu`` (M, n, C) innovations (NaN: none); fills ``out_mu`` (n, M), the predictive
+    innovation variances ``out_var`` (M, n, C) used at each row and the rows' log likelihoods
+    ``out_ll`` (n, M) (zero where a row is not used)."""
     M, n, C = nu.shape
     s1 = np.zeros((M, C))  # bias-corrected EW mean of nu^2: sum of weights and weighted sum
     s0 = np.zeros((M, C))
@@ -129,6 +130,8 @@ def _mode_kernel(t, nu, tau, sojourn, warmup, mu0, out_mu, out_var):
                 if usable:
                     v = max(v, 1e-300)
                     ll[j] += -0.5 * (nu[j, k, ch] ** 2 / v + math.log(2.0 * math.pi * v))
+        for j in range(M):
+            out_ll[k, j] = ll[j]
         logmu = logmu + ll
         logmu -= logmu.max()
         mu = np.exp(logmu)
@@ -146,9 +149,124 @@ def _mode_kernel(t, nu, tau, sojourn, warmup, mu0, out_mu, out_var):
                     s1[j, ch] += x * x
 
 
+@njit(cache=True)
+def _two_sided_loglik(t, nu, tau, warmup, out_var, out_ll):
+    """The rows' log likelihoods ``out_ll`` (n, M) with each mode's innovation variance measured from
+    the rows on *both* sides of the row (exponentially weighted over ``tau`` each way, the row itself
+    left out): for a pass that already used the whole log. A channel enters a row when every mode
+    measured it there and the log holds at least ``warmup`` seconds of that channel."""
+    M, n, C = nu.shape
+    f0 = np.zeros((M, n, C))
+    f1 = np.zeros((M, n, C))
+    s0 = np.zeros((M, C))
+    s1 = np.zeros((M, C))
+    for k in range(n):  # forward sums over rows < k
+        a = math.exp(-(t[k] - t[k - 1]) / tau) if k > 0 else 1.0
+        for j in range(M):
+            for ch in range(C):
+                s0[j, ch] *= a
+                s1[j, ch] *= a
+                f0[j, k, ch] = s0[j, ch]
+                f1[j, k, ch] = s1[j, ch]
+                x = nu[j, k, ch]
+                if x == x:
+                    s0[j, ch] += 1.0
+                    s1[j, ch] += x * x
+    span = np.zeros((M, C))
+    t_lo = np.full((M, C), np.inf)
+    t_hi = np.full((M, C), -np.inf)
+    for k in range(n):
+        for j in range(M):
+            for ch in range(C):
+                if nu[j, k, ch] == nu[j, k, ch]:
+                    t_lo[j, ch] = min(t_lo[j, ch], t[k])
+                    t_hi[j, ch] = max(t_hi[j, ch], t[k])
+    for j in range(M):
+        for ch in range(C):
+            span[j, ch] = t_hi[j, ch] - t_lo[j, ch]
+    s0[:] = 0.0
+    s1[:] = 0.0
+    for k in range(n - 1, -1, -1):  # backward sums over rows > k, and the likelihoods
+        a = math.exp(-(t[k + 1] - t[k]) / tau) if k < n - 1 else 1.0
+        for j in range(M):
+            for ch in range(C):
+                s0[j, ch] *= a
+                s1[j, ch] *= a
+        for ch in range(C):
+            usable = True
+            for j in range(M):
+                if not (nu[j, k, ch] == nu[j, k, ch]) or not (span[j, ch] >= warmup) or f0[j, k, ch] + s0[j, ch] <= 0.0:
+                    usable = False
+            for j in range(M):
+                w0 = f0[j, k, ch] + s0[j, ch]
+                v = (f1[j, k, ch] + s1[j, ch]) / w0 if w0 > 0.0 else np.nan
+                out_var[j, k, ch] = v
+                if usable:
+                    v = max(v, 1e-300)
+                    out_ll[k, j] += -0.5 * (nu[j, k, ch] ** 2 / v + math.log(2.0 * math.pi * v))
+        for j in range(M):
+            for ch in range(C):
+                x = nu[j, k, ch]
+                if x == x:
+                    s0[j, ch] += 1.0
+                    s1[j, ch] += x * x
+
+
+@njit(cache=True)
+def _filter_given_loglik(t, ll, sojourn, mu0, out_mu):
+    """The forward (filtered) mode probabilities from given row log likelihoods ``ll`` (n, M)."""
+    n, M = ll.shape
+    logmu = np.log(mu0)
+    for k in range(n):
+        dt = t[k] - t[k - 1] if k > 0 else 0.0
+        if M > 1 and dt > 0.0:
+            p = min(dt / sojourn, 0.5)
+            mu = np.exp(logmu - logmu.max())
+            mu /= mu.sum()
+            c = (1.0 - p) * mu + p * (1.0 - mu) / (M - 1)
+            logmu = np.log(np.maximum(c, 1e-300))
+        logmu = logmu + ll[k]
+        logmu -= logmu.max()
+        mu = np.exp(logmu)
+        mu /= mu.sum()
+        for j in range(M):
+            out_mu[k, j] = mu[j]
+
+
+@njit(cache=True)
+def _smooth_kernel(t, sojourn, mu_f, ll, out_mu):
+    """Fixed-interval smoothing of the mode probabilities (forward-backward recursion of the
+    two-state Markov chain): ``mu_f`` (n, M) the forward (filtered) probabilities, ``ll`` (n, M) the
+    rows' log likelihoods; fills ``out_mu`` (n, M) with ``p(mode at k | all rows)``."""
+    n, M = mu_f.shape
+    logb = np.zeros(M)  # log backward message beta_k(j) = p(rows > k | mode j at k), normalised
+    for k in range(n - 1, -1, -1):
+        lg = np.log(np.maximum(mu_f[k], 1e-300)) + logb
+        lg -= lg.max()
+        g = np.exp(lg)
+        g /= g.sum()
+        for j in range(M):
+            out_mu[k, j] = g[j]
+        if k == 0:
+            break
+        # message to row k-1: sum_j P(j at k | i at k-1) L_j(k) beta_k(j)
+        dt = t[k] - t[k - 1]
+        p = min(dt / sojourn, 0.5) if (M > 1 and dt > 0.0) else 0.0
+        e = logb + ll[k]
+        e_max = e.max()
+        w = np.exp(e - e_max)
+        tot = w.sum()
+        nb = np.empty(M)
+        for i in range(M):
+            nb[i] = (1.0 - p) * w[i] + p * (tot - w[i]) / max(M - 1, 1)
+        logb = np.log(np.maximum(nb, 1e-300))
+        logb -= logb.max()
+
+
 def mode_probabilities(t: NDArray, innovations: list[NDArray], params: BlendParams | None = None,
-                       prior: NDArray | None = None) -> tuple[NDArray, NDArray]:  # fmt: skip
-    """Causal mode probabilities from per-row innovations (module docstring).
+                       prior: NDArray | None = None, smooth: bool = False) -> tuple[NDArray, NDArray]:  # fmt: skip
+    """Mode probabilities from per-row innovations (module docstring): causal, or smoothed over the
+    whole log.
 
     Parameters
     ----------
@@ -159,11 +277,17 @@ def mode_probabilities(t: NDArray, innovations: list[NDArray], params: BlendPara
     params : BlendParams, optional
     prior : array (M,), optional
         Initial probabilities (default: ``params.prior_observer`` for mode 0, the rest shared).
+    smooth : bool
+        ``False``: causal (filtered) probabilities, ``p(mode at k | rows <= k)``. ``True``: the
+        fixed-interval smoothed ones, ``p(mode at k | all rows)`` (forward-backward recursion of
+        the same Markov chain and likelihoods): for an estimate that already used the whole log.
 
     Returns
     -------
     mu : array (n, M)
-        Probability of each mode at each row (after the row's innovations).
+        Probability of each mode at each row (after the row's innovations; with ``smooth`` given
+        every row). The smoothed ones judge each row with innovation variances measured on both
+        sides of it (no warm-up: the first rows are judged with the variances that follow them).
     variance : array (M, n, C)
         Innovation variances each mode was judged with (measured from rows before).
     """
@@ -177,9 +301,19 @@ def mode_probabilities(t: NDArray, innovations: list[NDArray], params: BlendPara
         raise ParameterError(f"prior must hold {M} positive probabilities, got {prior!r}")
     out_mu = np.empty((n, M))
     out_var = np.full((M, n, C), np.nan)
-    _mode_kernel(np.ascontiguousarray(t, dtype=float), nu, float(params.time_constant), float(params.sojourn),
-                 float(params.warmup), prior / prior.sum(), out_mu, out_var)  # fmt: skip
-    return out_mu, out_var
+    out_ll = np.zeros((n, M))
+    tt = np.ascontiguousarray(t, dtype=float)
+    if not smooth:
+        _mode_kernel(tt, nu, float(params.time_constant), float(params.sojourn), float(params.warmup), prior / prior.sum(),
+                     out_mu, out_var, out_ll)  # fmt: skip
+        return out_mu, out_var
+    # smoothed: variances from both sides of each row, the filter, then the backward pass
+    _two_sided_loglik(tt, nu, float(params.time_constant), float(params.warmup), out_var, out_ll)
+    _filter_given_loglik(tt, out_ll, float(params.sojourn), prior / prior.sum(), out_mu)
+    out_s = np.empty((n, M))
+    if n:
+        _smooth_kernel(tt, float(params.sojourn), out_mu, out_ll, out_s)
+    return out_s, out_var
 
 
 @dataclass
@@ -222,7 +356,8 @@ class Blend:
         }
 
 
-def blend_traces(observer: EstimateTrace, kalman: EstimateTrace, params: BlendParams | None = None) -> Blend:
+def blend_traces(observer: EstimateTrace, kalman: EstimateTrace, params: BlendParams | None = None,
+                 smooth: bool = False) -> Blend:  # fmt: skip
     """Mode probabilities from the IMU innovations of both traces, and the mixture estimate.
 
     Parameters
@@ -230,10 +365,13 @@ def blend_traces(observer: EstimateTrace, kalman: EstimateTrace, params: BlendPa
     observer, kalman : EstimateTrace
         Over the same rows (``innovation`` columns 2, 3 = ``a_y``, ``r``; ``std`` of ``vy``).
     params : BlendParams, optional
+    smooth : bool
+        Smoothed mode probabilities (:func:`mode_probabilities`): for an observer pass that is
+        not causal anyway (the offline refinement); ``False`` keeps the blend causal.
     """
     if len(observer.t) != len(kalman.t) or not np.array_equal(observer.t, kalman.t):
         raise ParameterError("the observer and Kalman traces must cover the same rows")
-    mu, _ = mode_probabilities(observer.t, [observer.innovation[:, 2:4], kalman.innovation[:, 2:4]], params)
+    mu, _ = mode_probabilities(observer.t, [observer.innovation[:, 2:4], kalman.innovation[:, 2:4]], params, smooth=smooth)
     w0, w1 = mu[:, :1], mu[:, 1:]
     xo, xk = observer.state[:, :2], kalman.state[:, :2]
     x = w0 * xo + w1 * xk

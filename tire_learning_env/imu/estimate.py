@@ -219,7 +219,8 @@ def estimate_imu(
     runtime["linear_kf"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     params = blend or BlendParams()
-    b_final = blend_traces(core.trace, ktrace, params)
+    # the refined pass used the whole log: its mode probabilities may too (smoothed); the causal one stays causal
+    b_final = blend_traces(core.trace, ktrace, params, smooth=config.offline)
     b_online = blend_traces(core.online, ktrace, params)
     runtime["blend"] = time.perf_counter() - t0
     runtime["total"] = time.perf_counter() - t_all
