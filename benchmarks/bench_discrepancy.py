@@ -60,7 +60,7 @@ import numpy as np  # noqa: E402
 
 from tire_learning_env.discrepancy import DiscrepancyConfig, analyze, get_effect  # noqa: E402
 from tire_learning_env.discrepancy.effects import LIBRARY  # noqa: E402
-from tire_learning_env.discrepancy.truth import simulate_hidden  # noqa: E402
+from tire_learning_env.scenarios import simulate_hidden  # noqa: E402
 from tire_learning_env.io import read_log, write_log  # noqa: E402
 
 #: realistic sizes (chosen before measuring): name -> (hidden effects, library name, true parameters, speed profile)

@@ -21,7 +21,7 @@ from tire_learning_env.discrepancy._model import N_OUT, THETA_NOMINAL, simulate_
 from tire_learning_env.discrepancy.data import prepare
 from tire_learning_env.discrepancy.effects import LIBRARY, theta_of
 from tire_learning_env.discrepancy.residuals import ResidualModel
-from tire_learning_env.discrepancy.truth import (
+from tire_learning_env.scenarios import (
     EffectPlant,
     IdentificationRoad,
     parse_hidden_effects,

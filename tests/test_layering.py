@@ -22,6 +22,7 @@ LAYERS = (
     ("sensors", "driver", "rendering"),
     ("simulation",),
     ("high_order",),
+    ("scenarios",),  # hidden-effect plants, speed profiles and test roads for simulated logs (simulate --effect)
     ("envs", "registration"),
     ("formats", "io"),
     ("observer", "baselines"),
@@ -94,3 +95,11 @@ def test_the_check_sees_deferred_and_relative_imports(tmp_path):
     assert "tire_learning_env.envs.highway_scenes" in _imports(PACKAGE / "envs" / "highway.py")
     # a deferred import (inside a function) counts: wrappers/excitation.py imports the highway env lazily
     assert "tire_learning_env.envs.highway" in _imports(PACKAGE / "wrappers" / "excitation.py")
+
+
+def test_simulate_command_does_not_depend_on_the_analysis_package():
+    """``tire-learning simulate`` makes logs from :mod:`tire_learning_env.scenarios`; it must not import
+    the discrepancy analysis (issue 20), not even lazily."""
+    found = _imports(PACKAGE / "commands" / "simulate.py")
+    assert "tire_learning_env.scenarios" in found  # the check reads this file's imports at all
+    assert not sorted(m for m in found if m.split(".")[:2] == ["tire_learning_env", "discrepancy"]), found

@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..discrepancy.truth import DISCREPANCY_ROADS, HIDDEN_EFFECTS, SPEED_PROFILES, parse_hidden_effects, speed_profile
 from ..dynamics import PlantEffects
 from ..io import write_log
 from ..params import ParameterError, TireParams
 from ..roads import BUILTIN_ROADS
+from ..scenarios import HIDDEN_EFFECTS, SCENARIO_ROADS, SPEED_PROFILES, parse_hidden_effects, speed_profile
 from ..simulation import simulate
 from ..tires import axle_tires
 from ._common import (add_noise_arguments, add_vehicle_argument, camera_from_noise_args, parse_assignments, positive_float,
@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Closed-loop simulation of the truth vehicle on a road; writes the shared CSV log "
         "with ground-truth columns (true_*).",
     )
-    p.add_argument("--road", default="study1", choices=sorted(BUILTIN_ROADS) + sorted(DISCREPANCY_ROADS),
+    p.add_argument("--road", default="study1", choices=sorted(BUILTIN_ROADS) + sorted(SCENARIO_ROADS),
                    help="built-in road (default study1); identification = curves both ways + six lane changes, "
                    "repeating every 1800 m; curves = steady curves of R 250-400 m both ways, no lane changes, "
                    "repeating every 2400 m")
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     camera = camera_from_noise_args(args, args.camera_rate, **camera_kwargs)
     if not args.log_rate > 0 or args.log_rate > args.physics_rate:
         raise ParameterError("--log-rate must be > 0 and at most --physics-rate")
-    road = DISCREPANCY_ROADS[args.road]() if args.road in DISCREPANCY_ROADS else args.road
+    road = SCENARIO_ROADS[args.road]() if args.road in SCENARIO_ROADS else args.road
     plant = hidden.make_plant(vehicle, *axle_tires(vehicle, args.tire, TireParams(mu=args.mu)))
     log = simulate(road, args.duration, vehicle=vehicle, camera=camera, physics_rate=args.physics_rate,
                    seed=args.seed, speed_profile=speed_profile(args.speed_profile, vehicle.vx), plant=plant)

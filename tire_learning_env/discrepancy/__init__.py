@@ -9,7 +9,7 @@ a likelihood-ratio test and the BIC (:mod:`.selection`), adds it and reports the
 before and after (:mod:`.report`). The verdict is ``found``, ``ambiguous`` (candidates that fit
 equally well, with the manoeuvre that separates them, :mod:`.separation`), ``none`` or
 ``unexplained`` (:mod:`.workflow`). The steering a sparse log does not show is part of the noise
-(:mod:`.noise`). :mod:`.truth` puts named effects into simulated logs.
+(:mod:`.noise`). Simulated logs with named hidden effects come from :mod:`tire_learning_env.scenarios`.
 
 >>> from tire_learning_env.discrepancy import EFFECT_NAMES
 >>> EFFECT_NAMES[:3]
@@ -36,7 +36,7 @@ _LAZY = {"TIRE_CHOICES": "workflow", "DiscrepancyResult": "workflow", "analyze":
 
 def __getattr__(name: str):
     # the workflow (scipy.optimize/stats) and the report (matplotlib) load on first use, so that
-    # `tire-learning simulate`, which needs only .truth, stays quick to start
+    # importing the effect library stays quick
     if name in _LAZY:
         import importlib
 

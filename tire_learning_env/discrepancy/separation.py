@@ -73,7 +73,7 @@ def propose(a: str, b: str) -> dict:
 
 
 def hidden_effects_of(name: str, parameters: dict) -> dict[str, float]:
-    """``--effect`` assignments (:data:`.truth.HIDDEN_EFFECTS`) that put a library effect with these
+    """``--effect`` assignments (:data:`tire_learning_env.scenarios.HIDDEN_EFFECTS`) that put a library effect with these
     fitted parameters into the truth model."""
     if name == "cornering_stiffness_scale":
         return {"cornering_stiffness_scale_front": parameters["front"], "cornering_stiffness_scale_rear": parameters["rear"]}
@@ -115,7 +115,7 @@ def _simulated_log(result, effects: dict, recipe: str, seed: int):
     from ..params import CameraParams, TireParams
     from ..simulation import simulate
     from ..tires import axle_tires
-    from .truth import IdentificationRoad, parse_hidden_effects, speed_profile
+    from ..scenarios import IdentificationRoad, parse_hidden_effects, speed_profile
 
     d = result.data
     vehicle = replace(result.vehicle, vx=float(np.median(d.vx)))
