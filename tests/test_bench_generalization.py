@@ -14,6 +14,17 @@ BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_generalizati
 FAMILIES = ("low_order_pacejka", "multi_body", "held_out")
 
 
+@pytest.fixture(scope="module")
+def bg():
+    """``benchmarks/bench_generalization.py`` imported as a module (``benchmarks/`` is not a package)."""
+    sys.path.insert(0, str(BENCH.parent))
+    try:
+        import bench_generalization
+    finally:
+        sys.path.remove(str(BENCH.parent))
+    return bench_generalization
+
+
 def _run(tmp_path: Path, *args: str, timeout: float) -> tuple[dict, dict, float]:
     out = tmp_path / "generalization.json"
     t0 = time.perf_counter()
@@ -69,12 +80,7 @@ def test_quick_benchmark(tmp_path):
         assert written["families"][fam]["ukf"]["succeeded"] == 1
 
 
-def test_scenarios_are_seeded_and_prefix_stable():
-    sys.path.insert(0, str(BENCH.parent))
-    try:
-        import bench_generalization as bg
-    finally:
-        sys.path.remove(str(BENCH.parent))
+def test_scenarios_are_seeded_and_prefix_stable(bg):
     a = [bg.sample_scenario(f, i, 15, False) for f in FAMILIES for i in range(3)]
     b = [bg.sample_scenario(f, i, 15, False) for f in FAMILIES for i in range(3)]
     assert a == b
@@ -130,12 +136,7 @@ def test_quick_imu_and_fused_families(tmp_path):
     assert "imu_observer" in md and "both" in md
 
 
-def test_imu_and_fused_scenarios_are_seeded_and_in_range():
-    sys.path.insert(0, str(BENCH.parent))
-    try:
-        import bench_generalization as bg
-    finally:
-        sys.path.remove(str(BENCH.parent))
+def test_imu_and_fused_scenarios_are_seeded_and_in_range(bg):
     a = [bg.sample_scenario(f, i, 15, False) for f in EXTRA for i in range(8)]
     assert a == [bg.sample_scenario(f, i, 15, False) for f in EXTRA for i in range(8)]
     for s in a:

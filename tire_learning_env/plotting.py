@@ -74,47 +74,37 @@ def plot_path_and_steering(geometry: dict, t: NDArray, delta: NDArray, title: st
     return save_figure(fig, path)
 
 
-def plot_states(t: NDArray, true: NDArray, estimated: NDArray, title: str = "", path=None):
-    """The four error states, true vs estimated (paper Fig. 4 / 10 / 16)."""
-    fig, axes = plt.subplots(2, 2, figsize=(11, 6), sharex=True)
+def _true_vs_estimated(t, true, estimated, ylabels, scales, layout, figsize, title, path):
+    """Each column of ``true`` (black) and ``estimated`` (red dashed) against ``t``, times its
+    scale, one subplot each in a ``layout`` (rows, columns) grid sharing the time axis."""
+    fig, axes = plt.subplots(*layout, figsize=figsize, sharex=True)
     for i, ax in enumerate(axes.flat):
-        ax.plot(t, true[:, i] * _STATE_SCALE[i], "k-", lw=1.4, label="true")
-        ax.plot(t, estimated[:, i] * _STATE_SCALE[i], "r--", lw=1.0, label="estimated")
-        ax.set_ylabel(_STATE_LABELS[i])
+        ax.plot(t, true[:, i] * scales[i], "k-", lw=1.4, label="true")
+        ax.plot(t, estimated[:, i] * scales[i], "r--", lw=1.0, label="estimated")
+        ax.set_ylabel(ylabels[i])
         ax.grid(alpha=0.3)
-    axes[0, 0].legend()
-    for ax in axes[1]:
+    axes.flat[0].legend()
+    for ax in np.reshape(axes, layout)[-1]:
         ax.set_xlabel("time [s]")
     fig.suptitle(title)
     return save_figure(fig, path)
 
 
+def plot_states(t: NDArray, true: NDArray, estimated: NDArray, title: str = "", path=None):
+    """The four error states, true vs estimated (paper Fig. 4 / 10 / 16)."""
+    return _true_vs_estimated(t, true, estimated, _STATE_LABELS, _STATE_SCALE, (2, 2), (11, 6), title, path)
+
+
 def plot_slip_angles(t: NDArray, true: NDArray, estimated: NDArray, title: str = "", path=None):
     """Front and rear slip angles, true vs estimated (paper Fig. 5 / 11 / 17)."""
-    fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
-    for i, (ax, name) in enumerate(zip(axes, ("front", "rear"))):
-        ax.plot(t, true[:, i] * _DEG, "k-", lw=1.4, label="true")
-        ax.plot(t, estimated[:, i] * _DEG, "r--", lw=1.0, label="estimated")
-        ax.set_ylabel(rf"$\alpha_{name[0]}$ [deg]")
-        ax.grid(alpha=0.3)
-    axes[0].legend()
-    axes[1].set_xlabel("time [s]")
-    fig.suptitle(title)
-    return save_figure(fig, path)
+    labels = tuple(rf"$\alpha_{name[0]}$ [deg]" for name in ("front", "rear"))
+    return _true_vs_estimated(t, true, estimated, labels, (_DEG, _DEG), (2, 1), (10, 5.5), title, path)
 
 
 def plot_nonlinear_force(t: NDArray, true: NDArray, estimated: NDArray, title: str = "", path=None):
     """Nonlinear part of the axle forces, true vs estimated (paper Fig. 6 / 12 / 18)."""
-    fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
-    for i, (ax, name) in enumerate(zip(axes, ("front", "rear"))):
-        ax.plot(t, true[:, i], "k-", lw=1.4, label="true")
-        ax.plot(t, estimated[:, i], "r--", lw=1.0, label="estimated")
-        ax.set_ylabel(rf"$f_{{y{name[0]}}}$ [N]")
-        ax.grid(alpha=0.3)
-    axes[0].legend()
-    axes[1].set_xlabel("time [s]")
-    fig.suptitle(title)
-    return save_figure(fig, path)
+    labels = tuple(rf"$f_{{y{name[0]}}}$ [N]" for name in ("front", "rear"))
+    return _true_vs_estimated(t, true, estimated, labels, (1.0, 1.0), (2, 1), (10, 5.5), title, path)
 
 
 def plot_weights(t: NDArray, weights: NDArray, n_per_axle: int, title: str = "", path=None):
@@ -190,12 +180,7 @@ def plot_force_slip_loop(slip: NDArray, force: NDArray, steady: Callable[[NDArra
     if steady is not None:
         grid = np.linspace(np.min(slip), np.max(slip), 200)
         ax.plot(grid * _DEG, steady(grid), "k--", lw=1.2, label="steady-state tire model")
-    ax.set_xlabel("slip angle [deg]")
-    ax.set_ylabel("lateral force [N]")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    ax.set_title(title)
-    return save_figure(fig, path)
+    return _finish_force_slip(fig, ax, "lateral force [N]", title, path)
 
 
 def plot_tire_models(models: dict[str, Callable[[NDArray], NDArray]], span_deg: float = 12.0, title: str = "", path=None):
@@ -204,8 +189,13 @@ def plot_tire_models(models: dict[str, Callable[[NDArray], NDArray]], span_deg: 
     grid = np.radians(np.linspace(-span_deg, span_deg, 481))
     for label, fn in models.items():
         ax.plot(grid * _DEG, fn(grid), lw=1.4, label=label)
+    return _finish_force_slip(fig, ax, "axle lateral force [N]", title, path)
+
+
+def _finish_force_slip(fig, ax, ylabel: str, title: str, path):
+    """Labels (slip angle [deg] against ``ylabel``), grid, legend and title of a one-axes force-slip figure; saved."""
     ax.set_xlabel("slip angle [deg]")
-    ax.set_ylabel("axle lateral force [N]")
+    ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3)
     ax.legend()
     ax.set_title(title)

@@ -59,6 +59,13 @@ def _row(label: str, m: dict | None, paper: dict | None = None) -> str:
     )
 
 
+def _runs_done(results: dict[str, tuple[dict, dict | None]]):
+    """``(name, study, caption, (observer, baseline))`` of each run in :data:`RUNS` that ``results`` holds, in order."""
+    for name, study, _, caption in RUNS:
+        if name in results:
+            yield name, study, caption, results[name]
+
+
 def results_table(results: dict[str, tuple[dict, dict | None]]) -> str:
     """Markdown table: paper vs observer vs UKF per run (``results[name] = (observer, ukf)``)."""
     lines = [
@@ -66,10 +73,7 @@ def results_table(results: dict[str, tuple[dict, dict | None]]) -> str:
         "| stiffness error front / rear [%] | convergence time [s] | CPU s per simulated s |",
         "|---|---|---|---|---|---|---|",
     ]
-    for name, study, _, caption in RUNS:
-        if name not in results:
-            continue
-        obs, ukf = results[name]
+    for name, study, caption, (obs, ukf) in _runs_done(results):
         lines.append(f"| **{caption}** | | | | | | |")
         lines.append(_row("paper (Jeon et al. 2021)", None, PAPER_RESULTS.get(study)))
         lines.append(_row("neuro-adaptive observer (this package)", obs))
@@ -129,10 +133,7 @@ def _index(results: dict, command: str, elapsed: float, root: Path) -> str:
         "docs/high_order.md §6); the tire-level figures are in the extra row.",
         "",
     ]
-    for name, study, camera, caption in RUNS:
-        if name not in results:
-            continue
-        m, _ = results[name]
+    for name, _, caption, (m, _) in _runs_done(results):
         parts += [f"## {caption}", "", f"Settings: `{name}/metrics.json` → `study`. LMI: certified={m['lmi']['certified']}, "
                   f"decay rate {m['lmi']['decay_rate']:.2f} 1/s, solve {m['lmi']['solve_s']:.2f} s.", ""]
         for fig in ("path_and_steering", "states", "slip_angles", "nonlinear_force", "weights", "tire_curves", "force_slip_loop"):

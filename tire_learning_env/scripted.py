@@ -104,7 +104,22 @@ class NoExcitation(Manoeuvre):
 
 
 @dataclass(frozen=True)
-class CorneringRoad(Manoeuvre):
+class _RoadManoeuvre(Manoeuvre):
+    """A manoeuvre made by the road alone: ``amplitude`` is a path curvature [1/m]."""
+
+    amplitude_unit: ClassVar[str] = "1/m"
+    amplitude_bounds: ClassVar[tuple[float, float]] = (1e-4, 0.02)
+
+
+@dataclass(frozen=True)
+class _WeavingRoad(_RoadManoeuvre):
+    """A weaving road of peak curvature ``amplitude`` [1/m]."""
+
+    amplitude: float = 1.0 / 400.0
+
+
+@dataclass(frozen=True)
+class CorneringRoad(_RoadManoeuvre):
     """The paper's Study 1 road: 300 m straight, 750 m left arc, then a tighter left arc.
 
     ``amplitude`` is the curvature of the tighter arc [1/m]; the first arc has
@@ -113,8 +128,6 @@ class CorneringRoad(Manoeuvre):
 
     amplitude: float = 1.0 / 250.0
     name: ClassVar[str] = "cornering"
-    amplitude_unit: ClassVar[str] = "1/m"
-    amplitude_bounds: ClassVar[tuple[float, float]] = (1e-4, 0.02)
 
     def road(self) -> Road:
         r2 = 1.0 / self.amplitude
@@ -122,7 +135,7 @@ class CorneringRoad(Manoeuvre):
 
 
 @dataclass(frozen=True)
-class LaneChanges(Manoeuvre):
+class LaneChanges(_RoadManoeuvre):
     """Alternating lane changes, one after the other with ``gap`` metres straight between.
 
     ``amplitude`` is the peak path curvature [1/m]; a change of one lane width ``w``
@@ -134,8 +147,6 @@ class LaneChanges(Manoeuvre):
     first: float = 30.0  # [m]
     length: float = 2500.0  # [m] covered by changes
     name: ClassVar[str] = "lane_changes"
-    amplitude_unit: ClassVar[str] = "1/m"
-    amplitude_bounds: ClassVar[tuple[float, float]] = (1e-4, 0.02)
 
     def road(self) -> Road:
         width = 3.7
@@ -146,32 +157,26 @@ class LaneChanges(Manoeuvre):
 
 
 @dataclass(frozen=True)
-class SineWeavingRoad(Manoeuvre):
+class SineWeavingRoad(_WeavingRoad):
     """A weaving road ``kappa = A sin(2 pi s / wavelength)`` (after ``start``)."""
 
-    amplitude: float = 1.0 / 400.0
     wavelength: float = 300.0  # [m]
     start: float = 30.0  # [m]
     name: ClassVar[str] = "sine_road"
-    amplitude_unit: ClassVar[str] = "1/m"
-    amplitude_bounds: ClassVar[tuple[float, float]] = (1e-4, 0.02)
 
     def road(self) -> Road:
         return SineRoad(amplitude=self.amplitude, wavelength=self.wavelength, start=self.start)
 
 
 @dataclass(frozen=True)
-class ChirpWeavingRoad(Manoeuvre):
+class ChirpWeavingRoad(_WeavingRoad):
     """A weaving road whose wavelength shrinks from 600 m to 120 m over 1800 m."""
 
-    amplitude: float = 1.0 / 400.0
     wavelength_start: float = 600.0  # [m]
     wavelength_end: float = 120.0  # [m]
     length: float = 1800.0  # [m]
     start: float = 30.0  # [m]
     name: ClassVar[str] = "chirp_road"
-    amplitude_unit: ClassVar[str] = "1/m"
-    amplitude_bounds: ClassVar[tuple[float, float]] = (1e-4, 0.02)
 
     def road(self) -> Road:
         return ChirpRoad(self.amplitude, self.wavelength_start, self.wavelength_end, self.length, self.start)

@@ -99,64 +99,47 @@ class StudySpec:
 STUDY_IDS = (1, 2, 3)
 
 
+def _camera_study(study, title, road, plant, truth, nominal, camera, stiffness_known, notes) -> StudySpec:
+    """A study's settings; the observer's follow its camera (:meth:`ObserverConfig.for_camera`)."""
+    config = ObserverConfig.for_camera(camera, stiffness_known=stiffness_known, sensors="camera")
+    return StudySpec(study, title, road, plant, truth, nominal, camera, config, notes=notes)
+
+
 def study_spec(study: int, duration: float | None = None) -> StudySpec:
     """The paper's Study ``study`` (1: low-order, cornering; 2, 3: high-order, lane changes)."""
     sedan = VehicleParams()
     if study == 1:
-        spec = StudySpec(
-            1,
-            "Study 1: low-order model, Pacejka truth, known cornering stiffness",
-            road="study1",
-            plant="low_order",
-            true_vehicle=sedan,
-            nominal_vehicle=sedan,
-            camera=CameraParams(rate=1000.0),
-            config=ObserverConfig.for_camera(CameraParams(rate=1000.0), stiffness_known=True, sensors="camera"),
-            notes=(
-                "paper settings: 1 kHz noise-free camera, zero initial state, LS warm start; the certified "
-                "decay rate (reported under lmi) exceeds the paper's 2 1/s",
-            ),
-        )
+        spec = _camera_study(
+            1, "Study 1: low-order model, Pacejka truth, known cornering stiffness", "study1", "low_order", sedan, sedan,
+            CameraParams(rate=1000.0), True,
+            ("paper settings: 1 kHz noise-free camera, zero initial state, LS warm start; the certified "
+             "decay rate (reported under lmi) exceeds the paper's 2 1/s",),
+        )  # fmt: skip
     elif study in (2, 3):
         from .high_order import MultiBodyPlant, effective_cornering_stiffness
 
         plant = MultiBodyPlant("lane_changes")
         c_eff = effective_cornering_stiffness(plant.params, plant.config)
         truth = plant.vehicle  # equivalent bicycle, Cf/Cr = tire-level stiffness at static load
+        model = "CommonRoad multi-body model (BMW 320i, PAC2002, 0.45 m relaxation), 1 kHz"
         if study == 2:
             ratio = (102466.1678 / 90211.1436, 102466.1678 / 87945.9970)  # the paper's +13.6 % / +16.5 %
-            nominal = truth.replace(Cf=c_eff[0] * ratio[0], Cr=c_eff[1] * ratio[1])
-            spec = StudySpec(
-                2,
-                "Study 2: high-order model, unknown cornering stiffness (assumed 13.6 % / 16.5 % too high)",
-                road="lane_changes",
-                plant="high_order",
-                true_vehicle=truth,
-                nominal_vehicle=nominal,
-                camera=CameraParams(rate=1000.0),
-                config=ObserverConfig.for_camera(CameraParams(rate=1000.0), stiffness_known=False, sensors="camera"),
-                notes=(
-                    "CommonRoad multi-body model (BMW 320i, PAC2002, 0.45 m relaxation), 1 kHz noise-free camera",
-                    "assumed stiffness = effective axle stiffness x the paper's ratios 102466/90211 and 102466/87946",
-                    "warm start without the linear-region rule: the nominal stiffness is the unknown",
-                ),
-            )
+            spec = _camera_study(
+                2, "Study 2: high-order model, unknown cornering stiffness (assumed 13.6 % / 16.5 % too high)",
+                "lane_changes", "high_order", truth, truth.replace(Cf=c_eff[0] * ratio[0], Cr=c_eff[1] * ratio[1]),
+                CameraParams(rate=1000.0), False,
+                (f"{model} noise-free camera",
+                 "assumed stiffness = effective axle stiffness x the paper's ratios 102466/90211 and 102466/87946",
+                 "warm start without the linear-region rule: the nominal stiffness is the unknown"),
+            )  # fmt: skip
         else:
-            spec = StudySpec(
-                3,
-                "Study 3: high-order model, known cornering stiffness, camera noise +/-1 cm, +/-1 deg",
-                road="lane_changes",
-                plant="high_order",
-                true_vehicle=truth,
-                nominal_vehicle=truth.replace(Cf=c_eff[0], Cr=c_eff[1]),
-                camera=CameraParams.paper_noise(rate=1000.0),
-                config=ObserverConfig.for_camera(CameraParams.paper_noise(rate=1000.0), stiffness_known=True, sensors="camera"),
-                notes=(
-                    "CommonRoad multi-body model (BMW 320i, PAC2002, 0.45 m relaxation), 1 kHz camera with the "
-                    "paper's uniform noise",
-                    "known stiffness = the effective axle stiffness a bicycle model sees (docs/high_order.md §6)",
-                ),
-            )
+            spec = _camera_study(
+                3, "Study 3: high-order model, known cornering stiffness, camera noise +/-1 cm, +/-1 deg",
+                "lane_changes", "high_order", truth, truth.replace(Cf=c_eff[0], Cr=c_eff[1]),
+                CameraParams.paper_noise(rate=1000.0), True,
+                (f"{model} camera with the paper's uniform noise",
+                 "known stiffness = the effective axle stiffness a bicycle model sees (docs/high_order.md §6)"),
+            )  # fmt: skip
     else:
         raise ParameterError(f"unknown study {study!r}; studies are {STUDY_IDS}")
     return spec if duration is None else replace(spec, duration=float(duration))
@@ -200,26 +183,11 @@ def run_study(
     log, plant = _simulate(spec, plant_factory)
     result = estimate(log.sensors, spec.nominal_vehicle, spec.camera, spec.config, physics_dt=log.dt)
     nominal = (spec.nominal_vehicle.Cf, spec.nominal_vehicle.Cr)
-    true_curve, true_stiffness, tire_level = _references(plant)
-    metrics = compute_metrics(
-        t=result.trace.t,
-        xi_hat=result.trace.xi,
-        slip_hat=result.trace.slip,
-        force_nonlinear_hat=result.trace.force_nonlinear,
-        truth=log.truth,
-        curve=result.axle_force,
-        true_curve=true_curve,
-        stiffness_hat=result.cornering_stiffness(),
-        stiffness_true=true_stiffness,
-        nominal_stiffness=nominal,
-        lmi=result.gains.summary(),
-        runtime_s=result.runtime_s["total"],
-        curve_history=_online_history(result),
-    )
-    if tire_level is not None:
-        metrics.update(_tire_level_scores(metrics, result.axle_force, result.cornering_stiffness(), *tire_level))
-    sim_seconds = float(log.sensors["t"][-1] - log.sensors["t"][0] + log.dt)
-    metrics["cpu_s_per_simulated_s"] = result.runtime_s["total"] / sim_seconds
+    metrics = _score(
+        log, plant, nominal, result.runtime_s["total"], result.axle_force, result.cornering_stiffness(),
+        t=result.trace.t, xi_hat=result.trace.xi, slip_hat=result.trace.slip,
+        force_nonlinear_hat=result.trace.force_nonlinear, lmi=result.gains.summary(), curve_history=_online_history(result),
+    )  # fmt: skip
     metrics["uncertainty"] = {
         "verdict": result.verdict,
         "stiffness": result.stiffness_report(),
@@ -241,6 +209,23 @@ def run_study(
             if figures:
                 _figures(tmp, spec, log, plant, result, metrics, baseline_result)
     return to_jsonable(metrics) | ({"baseline": to_jsonable(baseline_metrics)} if baseline_metrics else {})
+
+
+def _score(log: SimulationLog, plant, nominal, runtime_s: float, curve, stiffness_hat, **estimate) -> dict:
+    """Metrics of one estimator's run on ``log`` (:func:`~.metrics.compute_metrics` against the
+    plant's references, the tire-level scores of a high-order plant, CPU s per simulated s).
+
+    ``estimate``: the estimator's ``t``, ``xi_hat``, ``slip_hat``, ``force_nonlinear_hat`` and
+    optionally ``lmi`` and ``curve_history``, as :func:`~.metrics.compute_metrics` takes them.
+    """
+    true_curve, true_stiffness, tire_level = _references(plant)
+    m = compute_metrics(truth=log.truth, curve=curve, true_curve=true_curve, stiffness_hat=stiffness_hat,
+                        stiffness_true=true_stiffness, nominal_stiffness=nominal, runtime_s=runtime_s, **estimate)  # fmt: skip
+    if tire_level is not None:
+        m.update(_tire_level_scores(m, curve, stiffness_hat, *tire_level))
+    sim_seconds = float(log.sensors["t"][-1] - log.sensors["t"][0] + log.dt)
+    m["cpu_s_per_simulated_s"] = runtime_s / sim_seconds
+    return m
 
 
 def _references(plant):
@@ -311,25 +296,12 @@ def _run_baseline(name: str, spec: StudySpec, log: SimulationLog, plant, nominal
     t0 = time.perf_counter()
     res = run_ukf_baseline(log.sensors, spec.nominal_vehicle, spec.camera)
     runtime = time.perf_counter() - t0
-    true_curve, true_stiffness, tire_level = _references(plant)
-    m = compute_metrics(
-        t=log.sensors["t"],
-        xi_hat=res.xi,
-        slip_hat=res.slip,
+    m = _score(
+        log, plant, nominal, runtime, res.axle_force, res.cornering_stiffness(),
+        t=log.sensors["t"], xi_hat=res.xi, slip_hat=res.slip,
         force_nonlinear_hat=res.force - res.slip * 2.0 * np.asarray(nominal),
-        truth=log.truth,
-        curve=res.axle_force,
-        true_curve=true_curve,
-        stiffness_hat=res.cornering_stiffness(),
-        stiffness_true=true_stiffness,
-        nominal_stiffness=nominal,
-        runtime_s=runtime,
         curve_history=res.curve_history() if hasattr(res, "curve_history") else None,
-    )
-    if tire_level is not None:
-        m.update(_tire_level_scores(m, res.axle_force, res.cornering_stiffness(), *tire_level))
-    sim_seconds = float(log.sensors["t"][-1] - log.sensors["t"][0] + log.dt)
-    m["cpu_s_per_simulated_s"] = runtime / sim_seconds
+    )  # fmt: skip
     m["estimator"] = "joint UKF (baseline)"
     return m, res
 

@@ -490,38 +490,34 @@ def make_excitation_env(
     """
     from ..envs.lane_keeping import LaneKeepingEnv
 
-    defaults = {"road": "straight", "camera": EXCITATION_CAMERA}
-    return _wrap(LaneKeepingEnv, defaults, env_kwargs, config, randomization, observer_config, record, keep_history,
-                 info_logs)  # fmt: skip
+    return _wrap(LaneKeepingEnv, {"road": "straight", "camera": EXCITATION_CAMERA}, config, randomization,
+                 observer_config, record, keep_history, info_logs, **env_kwargs)  # fmt: skip
 
 
 def make_highway_excitation_env(
     config: ExcitationConfig | Mapping | None = None,
     randomization: TruthRandomization | Mapping | bool | None = True,
-    observer_config: ObserverConfig | None = None,
-    record: bool = True,
-    keep_history: bool = False,
-    info_logs: bool = False,
-    **env_kwargs: Any,
+    **kwargs: Any,
 ) -> ExcitationWrapper:
     """``HighwayTrafficEnv`` -> :class:`EstimatorWrapper` -> :class:`ExcitationWrapper` (``TireLearning-HighwayExcitation-v0``).
 
     The ego car weaves in its lane among highway-env traffic. Defaults:
     ``camera=EXCITATION_CAMERA``, ``lane_change="off"`` (a lane change moves the
     reference by a lane width, which the lane penalty would read as a departure),
-    ``max_steering_offset`` from ``config``; other arguments as
-    :func:`make_excitation_env` and :class:`~tire_learning_env.envs.highway.HighwayTrafficEnv`.
+    ``max_steering_offset`` from ``config``; the other arguments (``observer_config``,
+    ``record``, ``keep_history``, ``info_logs`` and the env's) as :func:`make_excitation_env`
+    and :class:`~tire_learning_env.envs.highway.HighwayTrafficEnv`.
     """
     from ..envs.highway import HighwayTrafficEnv
 
-    defaults = {"camera": EXCITATION_CAMERA, "lane_change": "off"}
-    return _wrap(HighwayTrafficEnv, defaults, env_kwargs, config, randomization, observer_config, record, keep_history,
-                 info_logs)  # fmt: skip
+    return _wrap(HighwayTrafficEnv, {"camera": EXCITATION_CAMERA, "lane_change": "off"}, config, randomization, **kwargs)
 
 
-def _wrap(env_cls, defaults, env_kwargs, config, randomization, observer_config, record, keep_history, info_logs):
+def _wrap(env_cls, defaults, config=None, randomization=True, observer_config=None, record=True, keep_history=False,
+          info_logs=False, **env_kwargs):  # fmt: skip
     """Base env (``defaults`` overridden by ``env_kwargs``; the steering-offset range from the
-    config) -> :class:`EstimatorWrapper` -> :class:`ExcitationWrapper`."""
+    config) -> :class:`EstimatorWrapper` -> :class:`ExcitationWrapper` (arguments as
+    :func:`make_excitation_env`)."""
     cfg = coerce_params(ExcitationConfig, config, "config") or ExcitationConfig()
     base = env_cls(**{**defaults, **env_kwargs, "max_steering_offset": cfg.max_steering_offset})
     rnd = TruthRandomization() if randomization is True else (None if randomization is False else randomization)
