@@ -469,9 +469,10 @@ def advance_ticks(
     Notes
     -----
     The grouped arguments are plain tuples, not named tuples: numba unboxes the plant, camera and
-    driver groups about 2 us faster per call as plain tuples (1.4 vs 3.5 us), and with named
-    tuples the Cornering env ran 10.6k instead of 11.6k steps per CPU second (issue 20, measured;
-    one call per env step of 50 ticks). Each group is unpacked into named locals on entry. The RK4 midpoint curvature is looked up at ``s + vx dt/2 + ax dt^2/8`` (the exact midpoint
+    driver groups about 2 us faster per call as plain tuples (1.4 vs 3.5 us, of about 85 us per
+    Cornering env step of 50 ticks), and with named tuples built per call by the simulator the
+    Cornering env ran 10.6k instead of 11.6k steps per CPU second (issue 20, measured). Each
+    group is unpacked into named locals on entry. The RK4 midpoint curvature is looked up at ``s + vx dt/2 + ax dt^2/8`` (the exact midpoint
     under constant ``ax``). The Python loop of the base simulator with a speed profile omits the
     ``ax dt^2/8`` term (:func:`~tire_learning_env.simulation.advance_ticks_python`,
     ``midpoint_ax_factor``); with ``ax = 0`` the two agree to the bit.
