@@ -45,7 +45,8 @@ from .gains import GainDesign, ObserverGains, synthesize_gains
 from .model import MeasurementModel, measurement_model
 from .neuro_adaptive import AdaptationParams, HealthParams, NeuroAdaptiveObserver, axle_index
 from .offline import (OfflineFit, calibrate_force_error, curve_gradient, pem_cost, refine, select_prior_length,
-                      steering_hold_sensitivity, stiffness_readout)
+                      stiffness_readout)
+from .sensitivity import steering_hold_sensitivity, yaw_dynamics_check
 from .trace import EstimateTrace
 
 __all__ = ["ObserverConfig", "build_observer", "estimate", "EstimationResult", "detect_sensors", "fusion_fallback",
@@ -86,7 +87,7 @@ class ObserverConfig(_Params):
         log cannot tell (the curve and the latency absorb a wrong hold: the prediction-error
         cost preferred ``hold`` on a log where it read the stiffness +1.8 / +2.6 % off and
         ``ramp`` +0.15 / +0.14 %), so the bands add how much the answer moves under the other
-        hold (:func:`.offline.steering_hold_sensitivity`): negligible for rows at 1 kHz,
+        hold (:func:`.sensitivity.steering_hold_sensitivity`): negligible for rows at 1 kHz,
         large when the rows are sparse (a closed-loop log at 20 Hz rows: +11 / +18 % held,
         +1.2 / +1.8 % ramped).
     stiffness_known : bool
@@ -747,6 +748,10 @@ def estimate(
             fit.hold_alternatives = []
             hold_info = dict(hold_info, other=calibration["steering_hold"]["used"], refitted=True)
         calibration["steering_hold"].update(hold_info, used=obs.steering_hold)
+        if model.name == "camera":  # the yaw dynamics the stiffness leans on: the log may reject the file's
+            t1 = time.perf_counter()
+            calibration["yaw_dynamics"] = yaw_dynamics_check(obs, rows, fit)
+            runtime["yaw_dynamics_check"] = time.perf_counter() - t1
         offline = fit.trace
         runtime["offline_refinement"] = time.perf_counter() - t0
         calibration["offline"] = {

@@ -292,6 +292,13 @@ class NeuroAdaptiveObserver:
         self._configured_force_error = self.force_error
         self._model_tuple = self._make_model()
 
+    def set_vehicle(self, vehicle: VehicleParams) -> None:
+        """Predict with another vehicle (the same gains: for a refit, not a new design; keeps the state)."""
+        if not isinstance(vehicle, VehicleParams):
+            raise ParameterError(f"vehicle must be a VehicleParams, got {type(vehicle).__name__}")
+        self.vehicle = vehicle
+        self._model_tuple = self._make_model()
+
     def _adapt_force_error(self, force_error: float) -> None:
         """The block law's own process-noise level (until the next :meth:`reset`)."""
         self.force_error = float(force_error)

@@ -147,11 +147,13 @@ class OfflineFit:
     def prior_sensitivity(self, g: NDArray) -> NDArray:
         """Sensitivity variance of ``g^T w``: per assumption the log cannot settle, the largest
         squared change among its plausible alternatives (the prior length,
-        :func:`select_prior_length`; the steering hold, :func:`steering_hold_sensitivity`),
-        summed over the assumptions."""
+        :func:`select_prior_length`; the steering hold,
+        :func:`.sensitivity.steering_hold_sensitivity`; the yaw dynamics when the log rejects
+        the vehicle file's, :func:`.sensitivity.yaw_dynamics_check`), summed over the assumptions."""
         g = np.atleast_2d(g)
         out = np.zeros(g.shape[0])
-        for alts in (getattr(self, "prior_alternatives", None) or [], getattr(self, "hold_alternatives", None) or []):
+        for alts in (getattr(self, "prior_alternatives", None) or [], getattr(self, "hold_alternatives", None) or [],
+                     getattr(self, "dynamics_alternatives", None) or []):
             if alts:
                 out += np.max(np.vstack([(g @ d) ** 2 for d in alts]), axis=0)
         return out
@@ -502,70 +504,8 @@ def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: Off
     new.force_error_calibration = fit.force_error_calibration
     new.prior_alternatives = getattr(fit, "prior_alternatives", [])
     new.hold_alternatives = getattr(fit, "hold_alternatives", [])
+    new.dynamics_alternatives = getattr(fit, "dynamics_alternatives", [])
     return new, info
-
-
-def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, gate: float = 25.0,
-                              max_iter: int = 2, tol: float = 1e-3, min_decrease: float = 1e-2,
-                              min_row_period: float = 0.002, window_s: float = 300.0, decide_by_cost: bool = False,
-                              decisive_chi2: float = 10.0) -> dict:  # fmt: skip
-    """Refit under the other steering hold (``hold`` <-> ``ramp``) from the fit's weights and keep
-    the weight change in ``fit.hold_alternatives`` (:meth:`OfflineFit.variance` adds it).
-
-    What the steering did between two log rows is not in the log. A simulator holds it over
-    its step; a steering wheel sampled by a logger moves continuously; a driver reacting to
-    camera frames does a bit of both. Neither the prediction-error cost nor the evidence can
-    tell (the learned curve and the latency absorb a wrong choice), so the answer's change
-    under the other hold is reported as uncertainty: half of it is one standard deviation
-    (the two holds bracket what the steering did). Rows closer than ``min_row_period`` [s]
-    (a 1 kHz log) are skipped: the two holds differ by less than half a millisecond there.
-    A log longer than ``window_s`` [s] is refitted under both holds on its most active window
-    (the change, a timing effect, is about the same on any stretch of the drive).
-
-    With ``decide_by_cost`` (a model that measures a_y: the force, hence the steering, shows in
-    it at once) a cost difference above ``decisive_chi2`` between the two refitted holds
-    decides instead: no sensitivity term, and ``info["switch"]`` says whether the other hold
-    won (the caller refits under it). With a camera alone the cost does not decide: the
-    curve and the latency absorb a wrong hold (a 100 Hz log's cost preferred the held
-    steering by 20 while it read the stiffness +1.8 / +2.6 % off, the ramped +0.15 / +0.14 %).
-    """
-    t = np.asarray(sensors["t"], dtype=float)
-    period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
-    used = observer.steering_hold
-    other = "hold" if used == "ramp" else "ramp"
-    if period < min_row_period:
-        fit.hold_alternatives = []
-        return {"other": other, "sensitivity": "skipped: rows closer than "
-                f"{1000 * min_row_period:g} ms, the holds differ by less than half of that"}  # fmt: skip
-    lo, hi = observer._weight_box()
-    w0 = np.zeros_like(fit.weights)
-    rows = _continuation_rows(sensors, window_s)  # a long log: its most active window, both holds refitted
-    t_w = np.asarray(rows["t"], dtype=float)
-    fit_from = float(t_w[0]) + observer.settle_s
-    try:
-        w_same, _, c_same, _ = _gauss_newton(observer, rows, fit.weights, w0, fit.prior_precision, lo, hi, fit_from,
-                                             gate, max_iter, tol, min_decrease)  # fmt: skip
-        observer.steering_hold = other
-        w_alt, _, c_alt, it = _gauss_newton(observer, rows, w_same, w0, fit.prior_precision, lo, hi, fit_from, gate,
-                                            max_iter, tol, min_decrease)  # fmt: skip
-    finally:
-        observer.steering_hold = used
-        observer.reset(weights=fit.weights)
-        observer._state.pw[:] = fit.covariance
-    w_alt = fit.weights + (w_alt - w_same)
-    decrease = float(c_same[-1] - c_alt[-1])  # > 0: the other hold fits the window better (chi-square units)
-    info = {"other": other, "iterations": it, "window_s": [float(t_w[0]), float(t_w[-1])],
-            "cost_decrease_under_other_chi2": decrease}  # fmt: skip
-    if decide_by_cost and abs(decrease) > decisive_chi2:
-        fit.hold_alternatives = []
-        info["sensitivity"] = "decided by the fit (the measurement answers the steering directly)"
-        info["switch"] = decrease > 0
-        return info
-    # the two holds bracket what the steering did (held, ramped, or in between): half the change
-    # is the standard deviation, so the two-sigma band reaches the other hold's answer
-    fit.hold_alternatives = [0.5 * (w_alt - fit.weights)]
-    info["sensitivity"] = "refitted under the other hold; the change is in the bands"
-    return info
 
 
 def pem_cost(observer: NeuroAdaptiveObserver, sensors: dict, w: NDArray, prior_cov: NDArray | None = None,
