@@ -31,7 +31,7 @@ __all__ = [
     "write_report",
 ]
 
-_LAZY = {"TIRE_CHOICES": "workflow", "DiscrepancyResult": "workflow", "analyze": "workflow", "write_report": "report"}
+_LAZY = {"TIRE_CHOICES": "nominal", "DiscrepancyResult": "result", "analyze": "workflow", "write_report": "report"}
 
 
 def __getattr__(name: str):

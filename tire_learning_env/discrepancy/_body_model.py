@@ -38,14 +38,7 @@ from numba import njit, prange
 from .._kernels import V_IZ, V_LF, V_LR, V_M, tire_force
 from ._model import (
     CH_YAW,
-    N_OUT,
-    OUT_ALPHA_F,
-    OUT_ALPHA_R,
     OUT_AY,
-    OUT_FYF,
-    OUT_FYR,
-    OUT_LAG_F,
-    OUT_LAG_R,
     OUT_YAW,
     RELAX_MIN,
     TH_ACC_OFFSET,
@@ -65,8 +58,18 @@ from ._model import (
     TH_STEER_OFFSET,
     TH_STEER_QUICK,
     TH_YAW_BIAS,
+    fd_column,
     fill_nan_after,
-    substep_count,
+    gauss_newton_step,
+    interval_inputs,
+    rk4_update,
+    stage_values,
+    step_is_small,
+    step_shrink,
+    store_residuals,
+    substep_fractions,
+    tire_outputs,
+    window_buffers,
 )
 
 # per-row outputs of simulate_body_rows: columns 4..11 mean what they mean in _model (OUT_*)
@@ -209,41 +212,27 @@ def simulate_body_rows(x0, j0, j1, t, delta, dslope, vx, ax, veh, tf, tr, tabf, 
         dt = 0.0 if last else t[j + 1] - t[j]
         dlog = delta[j] if tau == 0.0 else logged_steer(t[j] - tau, j, t, delta, dslope)
         a1, b1, c1, d1, af, ar, Fyf, Fyr, ay = body_rhs(vy, r, laf, lar, dlog, vx[j], ax[j], veh, tf, tr, tabf, tabr, th)
+        tire_outputs(out, k, af, ar, Fyf, Fyr, laf, lar, sigma)
         out[k, OUT_VY] = vy
         out[k, OUT_R] = r
         out[k, OUT_VYD] = a1
         out[k, OUT_RD] = b1
         out[k, OUT_YAW] = r + b_r
         out[k, OUT_AY] = ay * (1.0 + s_a) + b_a + x_a * b1
-        out[k, OUT_ALPHA_F] = af
-        out[k, OUT_ALPHA_R] = ar
-        out[k, OUT_FYF] = Fyf
-        out[k, OUT_FYR] = Fyr
-        out[k, OUT_LAG_F] = laf if sigma > RELAX_MIN else af
-        out[k, OUT_LAG_R] = lar if sigma > RELAX_MIN else ar
         if last:
             break
-        n_sub = substep_count(dt, h_max, sigma, max(vx[j], vx[j + 1]))
-        h = dt / n_sub
-        dd = dslope[j] * dt
-        dv = vx[j + 1] - vx[j]
-        da = ax[j + 1] - ax[j]
+        n_sub, h, dd, dv, da = interval_inputs(j, dt, h_max, sigma, vx, dslope, ax)
         for i in range(n_sub):
-            f0 = i / n_sub
-            f1 = (i + 0.5) / n_sub
-            f2 = (i + 1.0) / n_sub
+            f0, f1, f2 = substep_fractions(i, n_sub)
             if tau == 0.0:
                 d_0 = delta[j] + f0 * dd
-                dm = delta[j] + f1 * dd
-                db = delta[j] + f2 * dd
+                dm, db = stage_values(delta, j, dd, f1, f2)
             else:
                 d_0 = logged_steer(t[j] + f0 * dt - tau, j, t, delta, dslope)
                 dm = logged_steer(t[j] + f1 * dt - tau, j, t, delta, dslope)
                 db = logged_steer(t[j] + f2 * dt - tau, j, t, delta, dslope)
-            vm = vx[j] + f1 * dv
-            vb = vx[j] + f2 * dv
-            am = ax[j] + f1 * da
-            ab = ax[j] + f2 * da
+            vm, vb = stage_values(vx, j, dv, f1, f2)
+            am, ab = stage_values(ax, j, da, f1, f2)
             hh = 0.5 * h
             if i > 0:
                 a1, b1, c1, d1, _, _, _, _, _ = body_rhs(
@@ -259,10 +248,10 @@ def simulate_body_rows(x0, j0, j1, t, delta, dslope, vx, ax, veh, tf, tr, tabf, 
                 vy + h * a3, r + h * b3, laf + h * c3, lar + h * d3, db, vb, ab, veh, tf, tr, tabf, tabr, th
             )
             c = h / 6.0
-            vy = vy + c * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-            r = r + c * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
-            laf = laf + c * (c1 + 2.0 * c2 + 2.0 * c3 + c4)
-            lar = lar + c * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
+            vy = rk4_update(vy, c, a1, a2, a3, a4)
+            r = rk4_update(r, c, b1, b2, b3, b4)
+            laf = rk4_update(laf, c, c1, c2, c3, c4)
+            lar = rk4_update(lar, c, d1, d2, d3, d4)
         if not (math.isfinite(vy) and math.isfinite(r) and abs(vy) < 1e3 and abs(r) < 1e2):
             fill_nan_after(out, k, n)
             return False
@@ -304,15 +293,9 @@ def body_window_residuals(
     """
     n_win = win_sim.shape[0]
     for w in prange(n_win):
-        j0 = win_sim[w]
-        j1 = win_end[w]
-        m0 = meas_ptr[w]
-        m1 = meas_ptr[w + 1]
+        j0, j1, m0, m1, traj, base, pert = window_buffers(win_sim, win_end, meas_ptr, w)
         nm = m1 - m0
-        traj = np.empty((j1 - j0 + 1, N_OUT))
-        base = np.empty(nm)
         trial = np.empty(nm)
-        pert = np.empty(nm)
         vlim = VY_LIMIT * vx[j0]
         x = x0_guess[w].copy()
         x[0] = min(max(x[0], -vlim), vlim)
@@ -330,31 +313,11 @@ def body_window_residuals(
                     xp[q] += fd[q]
                     simulate_body_rows(xp, j0, j1, t, delta, dslope, vx, ax, veh, tf, tr, tabf, tabr, th, h_max, traj)
                     predict_body_measurements(traj, j0, meas_row, meas_chan, m0, m1, pert)
-                    for mi in range(m0, m1):
-                        jac[mi, q] = meas_w[mi] * (pert[mi - m0] - base[mi - m0]) / fd[q]
-            A = np.zeros((N_STATE, N_STATE))
-            g = np.zeros(N_STATE)
-            for mi in range(m0, m1):
-                rr = meas_w[mi] * (meas_val[mi] - base[mi - m0])
-                for a in range(N_STATE):
-                    g[a] += jac[mi, a] * rr
-                    for b in range(N_STATE):
-                        A[a, b] += jac[mi, a] * jac[mi, b]
-            tr_a = A[0, 0] + A[1, 1]
-            for a in range(N_STATE):
-                A[a, a] += 1e-10 * tr_a + 1e-300
-            dx = np.linalg.solve(A, g)
-            if mode == 2:
-                small = True
-                for a in range(N_STATE):
-                    if abs(dx[a]) > tol[a]:
-                        small = False
-                if small:
-                    break
-            shrink = 1.0
-            for a in range(N_STATE):
-                if abs(dx[a]) * shrink > max_step[a]:
-                    shrink = max_step[a] / abs(dx[a])
+                    fd_column(jac, q, meas_w, pert, base, m0, m1, fd[q])
+            dx = gauss_newton_step(jac, meas_val, meas_w, base, m0, m1, N_STATE)
+            if mode == 2 and step_is_small(dx, tol):
+                break
+            shrink = step_shrink(dx, max_step)
             accepted = False
             for _ in range(5):
                 xt[0] = min(max(x[0] + shrink * dx[0], -vlim), vlim)
@@ -375,9 +338,4 @@ def body_window_residuals(
                 base[mi] = trial[mi]
         for a in range(N_STATE):
             x0_out[w, a] = x[a]
-        if ok and nm > 0:
-            for mi in range(m0, m1):
-                resid[mi] = meas_w[mi] * (meas_val[mi] - base[mi - m0])
-        else:
-            for mi in range(m0, m1):
-                resid[mi] = 1e3
+        store_residuals(resid, meas_val, meas_w, base, m0, m1, ok)

@@ -170,6 +170,112 @@ def fill_nan_after(out, k, n):
 
 
 @njit(cache=True, nogil=True)
+def window_buffers(win_sim, win_end, meas_ptr, w):
+    """Window ``w``'s rows and measurements and its work arrays (shared by the window kernels of this
+    module and :mod:`._body_model`): ``(j0, j1, m0, m1, traj (rows, N_OUT), base (nm,), pert (nm,))``."""
+    j0 = win_sim[w]
+    j1 = win_end[w]
+    m0 = meas_ptr[w]
+    m1 = meas_ptr[w + 1]
+    return j0, j1, m0, m1, np.empty((j1 - j0 + 1, N_OUT)), np.empty(m1 - m0), np.empty(m1 - m0)
+
+
+@njit(cache=True, nogil=True)
+def tire_outputs(out, k, af, ar, Fyf, Fyr, laf, lar, sigma):
+    """Row ``k``'s slip, axle-force and lagged-slip columns (``OUT_ALPHA_F`` .. ``OUT_LAG_R``)."""
+    out[k, OUT_ALPHA_F] = af
+    out[k, OUT_ALPHA_R] = ar
+    out[k, OUT_FYF] = Fyf
+    out[k, OUT_FYR] = Fyr
+    out[k, OUT_LAG_F] = laf if sigma > RELAX_MIN else af
+    out[k, OUT_LAG_R] = lar if sigma > RELAX_MIN else ar
+
+
+@njit(cache=True, nogil=True)
+def interval_inputs(j, dt, h_max, sigma, vx, dslope, u):
+    """RK4 plan of the row interval ``j`` (length ``dt``): ``(n_sub, h, d_delta, d_vx, d_u)``, the sub-step
+    count and length, and the changes of the steering, the speed and a third input ``u`` that is linear
+    between rows (``psi_dot_des`` for the camera model, ``ax`` for the body-frame model) over the interval."""
+    n_sub = substep_count(dt, h_max, sigma, max(vx[j], vx[j + 1]))
+    return n_sub, dt / n_sub, dslope[j] * dt, vx[j + 1] - vx[j], u[j + 1] - u[j]
+
+
+@njit(cache=True, nogil=True)
+def stage_values(x, j, dx, f1, f2):
+    """An input that is linear over row interval ``j`` (change ``dx``) at the fractions ``f1`` and ``f2`` of it."""
+    return x[j] + f1 * dx, x[j] + f2 * dx
+
+
+@njit(cache=True, nogil=True)
+def substep_fractions(i, n_sub):
+    """Start, middle and end of RK4 sub-step ``i`` of ``n_sub`` as fractions of the row interval."""
+    return i / n_sub, (i + 0.5) / n_sub, (i + 1.0) / n_sub
+
+
+@njit(cache=True, nogil=True)
+def rk4_update(x, c, k1, k2, k3, k4):
+    """Classical RK4 combination ``x + c (k1 + 2 k2 + 2 k3 + k4)`` with ``c = h / 6``."""
+    return x + c * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+@njit(cache=True, nogil=True)
+def fd_column(out, col, meas_w, pert, base, m0, m1, h):
+    """Column ``col`` of a weighted finite-difference sensitivity: ``meas_w (pert - base) / h``."""
+    for mi in range(m0, m1):
+        out[mi, col] = meas_w[mi] * (pert[mi - m0] - base[mi - m0]) / h
+
+
+@njit(cache=True, nogil=True)
+def gauss_newton_step(jac, meas_val, meas_w, base, m0, m1, n_state):
+    """Gauss-Newton step of a window's initial state on the weighted residual ``meas_w (y - base)``
+    (normal equations, regularised by 1e-10 of their trace)."""
+    A = np.zeros((n_state, n_state))
+    g = np.zeros(n_state)
+    for mi in range(m0, m1):
+        r = meas_w[mi] * (meas_val[mi] - base[mi - m0])
+        for a in range(n_state):
+            g[a] += jac[mi, a] * r
+            for b in range(n_state):
+                A[a, b] += jac[mi, a] * jac[mi, b]
+    tr_a = 0.0
+    for a in range(n_state):
+        tr_a += A[a, a]
+    for a in range(n_state):
+        A[a, a] += 1e-10 * tr_a + 1e-300
+    return np.linalg.solve(A, g)
+
+
+@njit(cache=True, nogil=True)
+def step_is_small(dx, tol):
+    """No component of the step exceeds its tolerance."""
+    for a in range(dx.shape[0]):
+        if abs(dx[a]) > tol[a]:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def step_shrink(dx, max_step):
+    """Factor that limits every component of the step to ``max_step`` (1 if none exceeds it)."""
+    shrink = 1.0
+    for a in range(dx.shape[0]):
+        if abs(dx[a]) * shrink > max_step[a]:
+            shrink = max_step[a] / abs(dx[a])
+    return shrink
+
+
+@njit(cache=True, nogil=True)
+def store_residuals(resid, meas_val, meas_w, base, m0, m1, ok):
+    """The window's weighted residual ``meas_w (y - base)``, or 1e3 everywhere when its simulation diverged."""
+    if ok and m1 > m0:
+        for mi in range(m0, m1):
+            resid[mi] = meas_w[mi] * (meas_val[mi] - base[mi - m0])
+    else:
+        for mi in range(m0, m1):
+            resid[mi] = 1e3  # a diverged simulation: huge but finite residual
+
+
+@njit(cache=True, nogil=True)
 def simulate_rows(x0, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, out):
     """Simulate rows ``j0..j1`` (inclusive) from the error state ``x0`` (4,) at row ``j0``.
 
@@ -209,29 +315,15 @@ def simulate_rows(x0, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr
         out[k, OUT_E2D] = e2d
         out[k, OUT_YAW] = e2d + pdd[j]
         out[k, OUT_AY] = (Fyf + Fyr + th[TH_WIND]) / m
-        out[k, OUT_ALPHA_F] = af
-        out[k, OUT_ALPHA_R] = ar
-        out[k, OUT_FYF] = Fyf
-        out[k, OUT_FYR] = Fyr
-        out[k, OUT_LAG_F] = laf if sigma > RELAX_MIN else af
-        out[k, OUT_LAG_R] = lar if sigma > RELAX_MIN else ar
+        tire_outputs(out, k, af, ar, Fyf, Fyr, laf, lar, sigma)
         if last:
             break
-        n_sub = substep_count(dt, h_max, sigma, max(vx[j], vx[j + 1]))
-        h = dt / n_sub
-        dd = dslope[j] * dt
-        dv = vx[j + 1] - vx[j]
-        dp = pdd[j + 1] - pdd[j]
+        n_sub, h, dd, dv, dp = interval_inputs(j, dt, h_max, sigma, vx, dslope, pdd)
         for i in range(n_sub):
-            f0 = i / n_sub
-            f1 = (i + 0.5) / n_sub
-            f2 = (i + 1.0) / n_sub
-            dm = delta[j] + f1 * dd
-            db = delta[j] + f2 * dd
-            vm = vx[j] + f1 * dv
-            vb = vx[j] + f2 * dv
-            pm = pdd[j] + f1 * dp
-            pb = pdd[j] + f2 * dp
+            f0, f1, f2 = substep_fractions(i, n_sub)
+            dm, db = stage_values(delta, j, dd, f1, f2)
+            vm, vb = stage_values(vx, j, dv, f1, f2)
+            pm, pb = stage_values(pdd, j, dp, f1, f2)
             hh = 0.5 * h
             if i > 0:
                 a1, b1, c1, d1, _, _, _, _ = model_rhs(
@@ -251,12 +343,12 @@ def simulate_rows(x0, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr
                 v4, e2 + h * w3, w4, laf + h * c3, lar + h * d3, db, vb, ax, pb, pddd, veh, tf, tr, tabf, tabr, th
             )
             c = h / 6.0
-            e1 = e1 + c * (e1d + 2.0 * v2 + 2.0 * v3 + v4)
-            e1d = e1d + c * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-            e2 = e2 + c * (e2d + 2.0 * w2 + 2.0 * w3 + w4)
-            e2d = e2d + c * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
-            laf = laf + c * (c1 + 2.0 * c2 + 2.0 * c3 + c4)
-            lar = lar + c * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
+            e1 = rk4_update(e1, c, e1d, v2, v3, v4)
+            e1d = rk4_update(e1d, c, a1, a2, a3, a4)
+            e2 = rk4_update(e2, c, e2d, w2, w3, w4)
+            e2d = rk4_update(e2d, c, b1, b2, b3, b4)
+            laf = rk4_update(laf, c, c1, c2, c3, c4)
+            lar = rk4_update(lar, c, d1, d2, d3, d4)
         if not (math.isfinite(e1) and math.isfinite(e1d) and math.isfinite(e2) and math.isfinite(e2d)):
             fill_nan_after(out, k, n)
             return False
@@ -345,14 +437,7 @@ def window_residuals(
     """
     n_win = win_sim.shape[0]
     for w in prange(n_win):
-        j0 = win_sim[w]
-        j1 = win_end[w]
-        m0 = meas_ptr[w]
-        m1 = meas_ptr[w + 1]
-        nm = m1 - m0
-        traj = np.empty((j1 - j0 + 1, N_OUT))
-        base = np.empty(nm)
-        pert = np.empty(nm)
+        j0, j1, m0, m1, traj, base, pert = window_buffers(win_sim, win_end, meas_ptr, w)
         x = x0_guess[w].copy()
         ok = True
         far = True
@@ -375,33 +460,12 @@ def window_residuals(
                     xp[q] += fd[q]
                     simulate_rows(xp, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, traj)
                     predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, pert)
-                    for mi in range(m0, m1):
-                        jac[mi, q] = meas_w[mi] * (pert[mi - m0] - base[mi - m0]) / fd[q]
-            # Gauss-Newton step on the weighted residual
-            A = np.zeros((4, 4))
-            g = np.zeros(4)
-            for mi in range(m0, m1):
-                r = meas_w[mi] * (meas_val[mi] - base[mi - m0])
-                for a in range(4):
-                    g[a] += jac[mi, a] * r
-                    for b in range(4):
-                        A[a, b] += jac[mi, a] * jac[mi, b]
-            tr_a = A[0, 0] + A[1, 1] + A[2, 2] + A[3, 3]
-            for a in range(4):
-                A[a, a] += 1e-10 * tr_a + 1e-300
-            dx = np.linalg.solve(A, g)
-            if mode == 2:
-                small = True
-                for a in range(4):
-                    if abs(dx[a]) > tol[a]:
-                        small = False
-                if small:
-                    break  # the residual at x is converged (the step changes it to second order only)
+                    fd_column(jac, q, meas_w, pert, base, m0, m1, fd[q])
+            dx = gauss_newton_step(jac, meas_val, meas_w, base, m0, m1, 4)
+            if mode == 2 and step_is_small(dx, tol):
+                break  # the residual at x is converged (the step changes it to second order only)
             # limit the step to a physically plausible change (the model is far from linear beyond)
-            shrink = 1.0
-            for a in range(4):
-                if abs(dx[a]) * shrink > max_step[a]:
-                    shrink = max_step[a] / abs(dx[a])
+            shrink = step_shrink(dx, max_step)
             far = False
             for a in range(4):
                 if abs(dx[a]) > 1e3 * tol[a]:
@@ -410,12 +474,7 @@ def window_residuals(
                 x[a] += shrink * dx[a]
         for a in range(4):
             x0_out[w, a] = x[a]
-        if ok and nm > 0:
-            for mi in range(m0, m1):
-                resid[mi] = meas_w[mi] * (meas_val[mi] - base[mi - m0])
-        else:
-            for mi in range(m0, m1):
-                resid[mi] = 1e3  # a diverged simulation: huge but finite residual
+        store_residuals(resid, meas_val, meas_w, base, m0, m1, ok)
 
 
 @njit(cache=True, parallel=True)
@@ -435,14 +494,7 @@ def steering_sensitivity(
     """
     n_win = win_sim.shape[0]
     for w in prange(n_win):
-        j0 = win_sim[w]
-        j1 = win_end[w]
-        m0 = meas_ptr[w]
-        m1 = meas_ptr[w + 1]
-        nm = m1 - m0
-        traj = np.empty((j1 - j0 + 1, N_OUT))
-        base = np.empty(nm)
-        pert = np.empty(nm)
+        j0, j1, m0, m1, traj, base, pert = window_buffers(win_sim, win_end, meas_ptr, w)
         dl = delta.copy()
         xw = x0[w].copy()
         simulate_rows(xw, j0, j1, t, dl, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, traj)
@@ -456,6 +508,4 @@ def steering_sensitivity(
             predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, pert)
             for j in range(ra, rb):
                 dl[j] = delta[j]
-            col = b - blk_ptr[w]
-            for mi in range(m0, m1):
-                out[mi, col] = meas_w[mi] * (pert[mi - m0] - base[mi - m0]) / h
+            fd_column(out, b - blk_ptr[w], meas_w, pert, base, m0, m1, h)

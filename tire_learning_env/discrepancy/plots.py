@@ -1,6 +1,6 @@
 """Figures of the discrepancy report (PNG), in the style of :mod:`tire_learning_env.plotting`.
 
-Each function takes a :class:`~.workflow.DiscrepancyResult` (or plain arrays), draws a new
+Each function takes a :class:`~.result.DiscrepancyResult` (or plain arrays), draws a new
 figure, saves it atomically when ``path`` is given (:func:`~tire_learning_env.plotting.save_figure`)
 and returns it.
 """

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..io import atomic_directory, atomic_write_json, atomic_write_text
 from . import plots
-from .workflow import DiscrepancyResult
+from .result import DiscrepancyResult
 
 __all__ = ["write_report", "render_markdown"]
 

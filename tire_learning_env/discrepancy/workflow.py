@@ -22,50 +22,26 @@ Verdict rules (``config`` = :class:`.config.DiscrepancyConfig`):
 
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass, field
-from typing import Any, Sequence
+from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ..io import DrivingLog
-from ..params import CameraParams, ParameterError, TireParams, VehicleParams
-from ..tires import CallableTire, LinearTire, TireModel, axle_tires
-from ._model import CHANNELS
+from ..params import ParameterError, TireParams, VehicleParams
 from .config import DiscrepancyConfig
-from .data import ModelData, noise_std, prepare
-from .diagnostics import (
-    GapSummary,
-    WhitenessTest,
-    cross_correlation,
-    gap,
-    locate_windows,
-    regimes,
-    turn_and_braking,
-    whiteness,
-)
-from .effects import IMU_CONFOUNDED, CandidateEffect, library_for
-from .residuals import Evaluation, ResidualModel
-from .selection import SelectionResult, acceptance_threshold, forward_selection
+from .data import ModelData, prepare
+from .diagnostics import cross_correlation, gap, locate_windows, regimes, turn_and_braking, whiteness
+from .effects import library_for
+from .evidence import ambiguous_alternatives, effect_entry, evidence_of
+from .nominal import TIRE_CHOICES, nominal_tires
+from .residuals import ResidualModel
+from .result import VERDICT_RULES, DiscrepancyResult, imu_steering
+from .selection import forward_selection
 from .separation import propose, verify_separation
 
 __all__ = ["TIRE_CHOICES", "VERDICT_RULES", "DiscrepancyResult", "analyze", "nominal_tires"]
-
-#: the verdict rules in plain words (also written to report.json)
-VERDICT_RULES = (
-    "found: at least one candidate effect passed the selection criterion and the residual of the model with the "
-    "accepted effects is white (camera portmanteau test, p >= whiteness_alpha). ambiguous: as found, but another "
-    "candidate that also passed the criterion fits the log about equally well (BIC within ambiguity_bic of the "
-    "accepted one): the candidates are listed with their parameters and evidence, none is named, and the manoeuvre "
-    "that would separate them is proposed (and checked by simulating it). none: no candidate passed and the "
-    "nominal residual is white: the nominal model explains the data within the noise. unexplained: a structured "
-    "residual remains that the accepted effects, if any, do not remove; effects accepted on the way are then listed "
-    "as partial_effects, never as the answer."
-)
-
-TIRE_CHOICES = ("pacejka", "linear", "learned")
 
 #: rows at most this far apart [s] (40 Hz and more) resolve the road-wheel angle of a car (the steering system's
 #: bandwidth is a few Hz): ``steering="auto"`` uses ``curvature`` (a sampled controller logged at its rate) and no
@@ -73,317 +49,6 @@ TIRE_CHOICES = ("pacejka", "linear", "learned")
 #: nominal residual, and the steering error between rows is estimated from the log when the residual is
 #: structured (:mod:`.noise`)
 SPARSE_ROWS_DT = 0.025
-
-#: effect pairs that e1/e2 alone cannot tell apart (the IMU can)
-_EQUIVALENT_WITHOUT_IMU = {frozenset({"road_bank", "crosswind"})}
-
-
-def nominal_tires(
-    log: DrivingLog, vehicle: VehicleParams, tire: str, tire_params: TireParams | None = None
-) -> tuple[TireModel, TireModel, dict]:
-    """Front/rear axle tires of the nominal model and a description.
-
-    ``learned`` runs the neuro-adaptive observer on the log (:func:`~tire_learning_env.observer.estimate`;
-    for an IMU-only log with ``sensors="imu"`` and the IMU noise measured by
-    :func:`~tire_learning_env.imu.imu_noise_std`) and uses the learned axle curves (refined
-    pass). Only the curves are used: the observer's state estimates (e.g. its causal
-    sideslip) never enter the comparison.
-    """
-    if tire == "learned" and log.kind == "imu":
-        from ..imu import imu_noise_std
-        from ..observer import ObserverConfig, estimate
-
-        s = log.sensors
-        rows = {k: np.asarray(s[k], dtype=float) for k in ("t", "delta", "vx", "ay", "yaw_rate")}
-        noise, _ = imu_noise_std(rows["t"], rows["ay"], rows["yaw_rate"])
-        result = estimate(rows, vehicle, config=ObserverConfig(sensors="imu", imu_noise=noise))
-        cf, cr = result.cornering_stiffness()
-        front = CallableTire(lambda a: result.axle_force(a, "front"), "learned front (IMU observer)")
-        rear = CallableTire(lambda a: result.axle_force(a, "rear"), "learned rear (IMU observer)")
-        h = math.radians(1.0)
-        secant = {a: float((result.axle_force(h, a) - result.axle_force(-h, a)) / (2 * h)) for a in ("front", "rear")}
-        return front, rear, {
-            "kind": "learned",
-            "learner": "neuro-adaptive observer on the IMU (tire_learning_env.observer.estimate, sensors='imu'), "
-            "refined curves; only its axle curves are used, never its state estimates",
-            "cornering_stiffness_per_tire": {"front": cf, "rear": cr},
-            "secant_pm1deg_per_axle_N_per_rad": secant,
-        }
-    if tire == "linear":
-        return LinearTire(2.0 * vehicle.Cf), LinearTire(2.0 * vehicle.Cr), {"kind": "linear"}
-    if tire == "pacejka":
-        tp = tire_params or TireParams()
-        f, r = axle_tires(vehicle, "pacejka", tp)
-        return f, r, {"kind": "pacejka", "mu": tp.mu, "shape": tp.shape, "curvature": tp.curvature}
-    if tire == "learned":
-        from ..observer import ObserverConfig, estimate
-
-        s = log.sensors
-        t = s["t"]
-        kappa = np.nan_to_num(s["kappa"])
-        pdd = s["vx"] * kappa
-        rows = {
-            "t": t, "delta": s["delta"], "vx": s["vx"], "psi_dot_des": pdd,
-            "psi_ddot_des": np.gradient(pdd, t), "e1": s["e1"], "e2": s["e2"],
-        }  # fmt: skip
-        frames = np.flatnonzero(np.isfinite(s["e1"]) & np.isfinite(s["e2"]))
-        rate = 1.0 / float(np.median(np.diff(t[frames])))
-        # gains designed for the camera noise estimated from the log itself
-        n1, n2 = noise_std(s["e1"][frames]), noise_std(s["e2"][frames])
-        camera = CameraParams(rate=rate)
-        if n1 > 0 and n2 > 0:
-            camera = CameraParams(rate=rate, noise="gaussian", e1_noise=n1, e2_noise=n2)
-        result = estimate(rows, vehicle, camera, ObserverConfig(), physics_dt=float(np.median(np.diff(t))))
-        cf, cr = result.cornering_stiffness()
-        front = CallableTire(lambda a: result.axle_force(a, "front"), "learned front")
-        rear = CallableTire(lambda a: result.axle_force(a, "rear"), "learned rear")
-        return front, rear, {"kind": "learned", "cornering_stiffness_per_tire": {"front": cf, "rear": cr}}
-    raise ParameterError(f"tire must be one of {TIRE_CHOICES}, got {tire!r}")
-
-
-@dataclass
-class DiscrepancyResult:
-    """Everything the workflow found (see :meth:`to_json` for the ``report.json`` layout)."""
-
-    verdict: str
-    effects: list[dict]
-    partial_effects: list[dict]
-    gap_before: GapSummary
-    gap_after: GapSummary
-    gap_after_partial: GapSummary | None
-    whiteness_before: WhitenessTest
-    whiteness_after: WhitenessTest
-    selection: SelectionResult
-    data: ModelData
-    model: ResidualModel
-    nominal: Evaluation
-    final: Evaluation
-    trajectories_before: NDArray
-    trajectories_after: NDArray
-    windows_before: list[dict]
-    windows_after: list[dict]
-    regimes_before: dict
-    regimes_after: dict
-    cross_correlation_before: dict
-    cross_correlation_after: dict
-    tire: dict
-    vehicle: VehicleParams
-    config: DiscrepancyConfig
-    source: str
-    runtime_s: float
-    notes: list[str] = field(default_factory=list)
-    turn_braking_before: dict | None = None
-    turn_braking_after: dict | None = None
-    steering_mode: str = "curvature"
-    input_noise: Any = None
-    candidates: list[dict] = field(default_factory=list)
-    separating_manoeuvre: dict | None = None
-
-    @property
-    def gap_ratio(self) -> float:
-        """Noise-normalised band RMS over all channels, before / after."""
-        return _ratio(self.gap_before.normalised_band_rms["all"], self.gap_after.normalised_band_rms["all"])
-
-    def gap_ratios(self) -> dict:
-        """Ratios per channel: band RMS, raw RMS, and the normalised camera (or IMU) / all figures."""
-        b, a = self.gap_before, self.gap_after
-        out = {
-            "band": {k: _ratio(b.band_rms[k], a.band_rms[k]) for k in b.band_rms},
-            "raw": {k: _ratio(b.rms[k], a.rms[k]) for k in b.rms},
-            "normalised_band": {
-                k: _ratio(b.normalised_band_rms[k], a.normalised_band_rms[k])
-                for k in ("camera", "imu", "all")
-                if k in b.normalised_band_rms
-            },
-        }
-        return out
-
-    def _method_text(self) -> str:
-        cfg = self.config
-        if self.data.kind == "imu":
-            return (
-                "IMU-only log: the body-frame bicycle model (states vy, r; inputs the logged delta, the time-varying "
-                f"vx and a smoothed ax) is compared with the measured yaw rate and lateral acceleration. The log is cut "
-                f"into windows of about {cfg.window:g} s; in each the model runs open loop from an initial state "
-                "[vy, r] at the window's first row, fitted to that window's own measurements (descent Gauss-Newton, "
-                "kept physical); the residual is measurement minus simulation, weighted by each channel's noise "
-                "level. No state estimate of any observer is used as a measurement. The gap is the residual's RMS, "
-                "raw and in the vehicle-dynamics band (0.5 s centred moving average within each window)."
-            )
-        return (
-            f"The log is cut into windows of about {cfg.window:g} s; in each the model runs open loop on the "
-            f"logged delta, vx and kappa from an initial state fitted to that window's own measurements "
-            f"(simulation starts {cfg.preroll:g} s before the window's first measurement); the residual is "
-            "measurement minus simulation, weighted by each channel's noise level. The gap is its RMS, raw "
-            "and in the vehicle-dynamics band (0.5 s centred moving average within each window)."
-        )
-
-    def to_json(self) -> dict[str, Any]:
-        """The ``report.json`` document."""
-        cfg = self.config
-        d = self.data
-        sel = self.selection
-        rounds = []
-        for st in sel.steps:
-            rounds.append(
-                {
-                    "round": st.round,
-                    "chi2_before": st.chi2_before,
-                    "accepted": st.accepted,
-                    "dropped": st.dropped,
-                    "candidates": st.tried,
-                }
-            )
-        return {
-            "verdict": self.verdict,
-            "effects": self.effects,
-            **({"candidates": self.candidates, "separating_manoeuvre": self.separating_manoeuvre}
-               if self.verdict == "ambiguous" else {}),
-            "gap_before": self.gap_before.to_dict(),
-            "gap_after": self.gap_after.to_dict(),
-            "gap_ratio": self.gap_ratio,
-            "gap_ratios": self.gap_ratios(),
-            "partial_effects": self.partial_effects,
-            "gap_after_partial": None if self.gap_after_partial is None else self.gap_after_partial.to_dict(),
-            "comparison": {
-                "method": "multiple-shooting output error",
-                "description": self._method_text(),
-                "window_s": cfg.window,
-                "preroll_s": cfg.preroll,
-                "windows": d.n_windows,
-                "measurements": d.n_measurements,
-                "channels": list(d.channels),
-                "noise_sigma": {c: float(d.sigma[i]) for i, c in enumerate(CHANNELS) if c in d.channels},
-                "noise_sigma_estimated": {
-                    c: float(d.sigma_estimated[i]) for i, c in enumerate(CHANNELS) if c in d.channels
-                },
-                "steering_between_rows": self.steering_mode if d.kind == "camera" else _imu_steering(cfg),
-                **({"input_noise": self.input_noise.to_dict()} if self.input_noise is not None else {}),
-                **({"model": "body-frame bicycle model (states vy, r)", "primary_channels": ["yaw_rate", "ay"],
-                    "preroll_s": 0.0,
-                    "ax_input": "slope of vx (0.1 s centred moving average) + slow part (1 s) of logged ax - slope"}
-                   if d.kind == "imu" else {}),
-            },
-            "nominal_model": {"vehicle": self.vehicle.to_dict(), "vehicle_source": _vehicle_source(),
-                              "tire": self.tire},
-            "log": {
-                **({"kind": "imu"} if d.kind == "imu" else {}),
-                "source": self.source,
-                "rows": int(len(d.t)),
-                "duration_s": float(d.t[-1] - d.t[0]),
-                "speed_variation": d.speed_variation,
-                "notes": d.notes,
-            },
-            "selection": {
-                "criterion": (
-                    "chi2 = sum(((y - y_model)/sigma)^2) with the noise levels fixed; accept the best candidate of a "
-                    f"round if its likelihood-ratio p-value < {cfg.alpha:g} / (candidates in the round) and it lowers "
-                    "BIC = chi2 + k ln(n); refit all accepted effects jointly; drop any that is no longer significant; "
-                    f"stop when none passes or {cfg.max_effects} are in. Candidates whose score (predicted chi2 "
-                    "reduction) is below a quarter of the acceptance threshold are reported but not fitted."
-                ),
-                "n_measurements": d.n_measurements,
-                "rounds": rounds,
-                "evaluations": sel.n_evaluations,
-            },
-            "whiteness": {"before": self.whiteness_before.to_dict(), "after": self.whiteness_after.to_dict(),
-                          "alpha": cfg.whiteness_alpha},  # fmt: skip
-            "locate": {
-                "windows_before": self.windows_before,
-                "windows_after": self.windows_after,
-                "regimes_before": self.regimes_before,
-                "regimes_after": self.regimes_after,
-                "cross_correlation_before": self.cross_correlation_before,
-                "cross_correlation_after": self.cross_correlation_after,
-                **({"turn_and_braking_before": self.turn_braking_before,
-                    "turn_and_braking_with_accepted_effects": self.turn_braking_after}
-                   if self.turn_braking_before is not None else {}),
-            },
-            "library": [
-                {"name": e.name, "parameters": e.units_dict(), "description": e.description}
-                for e in library_for(d.kind)
-            ],
-            **({"identifiability": _identifiability_doc()} if d.kind == "imu" else {}),
-            "verdict_rules": VERDICT_RULES if d.kind == "camera" else VERDICT_RULES.replace(
-                "camera portmanteau test", "portmanteau test of the yaw_rate and ay residuals"
-            ),
-            "config": cfg.to_dict(),
-            "runtime_s": self.runtime_s,
-            "notes": self.notes,
-        }
-
-
-def _imu_steering(cfg: DiscrepancyConfig) -> str:
-    return "linear" if cfg.steering in ("curvature", "auto") else cfg.steering
-
-
-def _identifiability_doc() -> list[dict]:
-    return [{"effects": sorted(pair), "why": why} for pair, why in IMU_CONFOUNDED.items()] + [
-        {
-            "effects": ["lateral_load_transfer", "nominal tire curve"],
-            "why": "the load-transfer loss is a function of a_y, which rises with slip: a tire curve learned from the "
-            "same log as a function of slip (--tire learned) already contains most of it",
-        },
-        {
-            "effects": ["crosswind"],
-            "why": "not in the IMU library: on a closed track the car's heading turns through any wind every lap, so a "
-            "constant body-frame side force is not a wind; a constant one would equal road_bank + ay_bias",
-        },
-    ]
-
-
-def _ratio(before: float, after: float) -> float:
-    if after <= 0:
-        return math.inf if before > 0 else 1.0
-    return float(before / after)
-
-
-def _effect_entry(
-    effect: CandidateEffect, values: NDArray, stderr: NDArray, evidence: dict, channels: tuple[str, ...],
-    kind: str = "camera",
-) -> dict:  # fmt: skip
-    entry = {
-        "name": effect.name,
-        "parameters": effect.as_dict(values),
-        "units": effect.units_dict(),
-        "standard_errors": effect.as_dict(stderr),
-        "description": effect.description,
-        "evidence": evidence,
-    }
-    if kind == "imu":
-        theory = {next(iter(pair - {effect.name})): why for pair, why in IMU_CONFOUNDED.items() if effect.name in pair}
-        corr = evidence.get("signature_correlation", {})
-        lr = float(evidence.get("likelihood_ratio", 0.0))
-        limit = float(evidence.get("acceptance_threshold", 0.0))
-        # the part of the effect's likelihood ratio that another candidate cannot reproduce, to first
-        # order: LR (1 - rho^2); below the acceptance threshold the log cannot tell the two apart
-        separation = {n: lr * (1.0 - c * c) for n, c in corr.items()}
-        close = sorted((n for n in corr if separation[n] < limit), key=lambda n: -corr[n])
-        if theory:
-            entry["evidence"]["confounded_in_theory_with"] = theory
-        if corr:
-            entry["evidence"]["separation_from"] = {
-                n: separation[n] for n in sorted(corr, key=lambda n: separation[n])[:5]
-            }
-        if close:
-            entry["evidence"]["indistinguishable_from"] = close[0] if len(close) == 1 else close
-            entry["evidence"]["note"] = (
-                f"on this log the signature of {effect.name} correlates at "
-                + ", ".join(f"{corr[n]:.3f} with {n}" for n in close)
-                + f": the part of its likelihood ratio the other cannot reproduce, LR (1 - rho^2), is below the "
-                f"acceptance threshold {limit:.3g}; the data cannot tell them apart, the name is the better fit, "
-                "not a proof"
-            )
-    if "yaw_rate" not in channels and "ay" not in channels:
-        for pair in _EQUIVALENT_WITHOUT_IMU:
-            if effect.name in pair:
-                other = next(iter(pair - {effect.name}))
-                entry["evidence"]["indistinguishable_from"] = other
-                entry["evidence"]["note"] = (
-                    f"without IMU channels {effect.name} and {other} act identically on e1/e2 (a constant lateral "
-                    "force); the accelerometer would tell them apart"
-                )
-    return entry
 
 
 def analyze(
@@ -513,7 +178,7 @@ def analyze(
         white_final = w_final.p_value >= config.whiteness_alpha
         entries = []
         for e, values, stderr in sel.accepted:
-            ev = _evidence(sel, e, n, config)
+            ev = evidence_of(sel, e, n, config)
             if e.name == "road_superelevation" and data.kind == "camera":
                 # the cap is identified only where it binds: say whether it was reached on this log
                 reached = float(values[0] * np.max(np.abs(data.kappa)))
@@ -523,11 +188,11 @@ def analyze(
                         f"the cap is not reached on this log (rate x largest |kappa| = {reached:.3g} rad): the log "
                         "bounds the cap from below only; its value and standard error are not an estimate"
                     )
-            entries.append(_effect_entry(e, values, stderr, ev, data.channels, data.kind))
+            entries.append(effect_entry(e, values, stderr, ev, data.channels, data.kind))
         ambiguous: list[dict] = []
         manoeuvre = None
         if sel.accepted and white_final:
-            ambiguous = _ambiguous_alternatives(sel, entries, n, config)
+            ambiguous = ambiguous_alternatives(sel, entries, n, config)
         if ambiguous:
             # the best-fitting candidate and the alternatives the log cannot tell apart from it
             verdict, partial = "ambiguous", []
@@ -617,51 +282,6 @@ class _Partial:
     config: DiscrepancyConfig
 
 
-def _ambiguous_alternatives(sel: SelectionResult, entries: list[dict], n: int, config: DiscrepancyConfig) -> list[dict]:
-    """The accepted effect with candidates that fit its round about equally well, best first (else empty).
-
-    An alternative qualifies when it was fitted in the round that accepted an effect, passed the
-    acceptance test itself, is not accepted in the end, and its BIC is within ``config.ambiguity_bic``
-    of the accepted effect's. Each entry: name, parameters, chi2, BIC difference to the best, evidence.
-    """
-    final = {e["name"] for e in entries}
-    for st in sel.steps:
-        if st.accepted is None or st.accepted not in final:
-            continue
-        best = st.tried[st.accepted]
-        level = config.alpha / len(st.tried)
-        bic_best = best["chi2"] + best["k"] * math.log(n)
-        group = []
-        for name, info in st.tried.items():
-            if name == st.accepted or name in final or not info.get("fitted"):
-                continue
-            bic = info["chi2"] + info["k"] * math.log(n)
-            if info["p_value"] < level and info["delta_bic"] < 0.0 and bic - bic_best < config.ambiguity_bic:
-                group.append((bic - bic_best, name, info))
-        if not group:
-            continue
-        entry = next(e for e in entries if e["name"] == st.accepted)
-        out = [{
-            "name": st.accepted, "parameters": entry["parameters"], "units": entry["units"],
-            "standard_errors": entry["standard_errors"], "delta_bic_to_best": 0.0, "chi2": best["chi2"],
-            "likelihood_ratio": best["lr"], "p_value": best["p_value"], "description": entry["description"],
-        }]  # fmt: skip
-        for dbic, name, info in sorted(group, key=lambda g: g[0]):
-            eff = next(c for c in library_for(_sel_kind(sel)) if c.name == name)
-            out.append({
-                "name": name, "parameters": info["parameters"], "units": eff.units_dict(),
-                "delta_bic_to_best": float(dbic), "chi2": info["chi2"], "likelihood_ratio": info["lr"],
-                "p_value": info["p_value"], "description": eff.description,
-            })  # fmt: skip
-        return out
-    return []
-
-
-def _sel_kind(sel: SelectionResult) -> str:
-    """Log kind of a selection (the IMU model state has 2 entries, the camera model 4)."""
-    return "imu" if sel.nominal.x0.shape[1] == 2 else "camera"
-
-
 def _prepare_model(model: ResidualModel, config: DiscrepancyConfig, notes: list[str]):
     """Steering between rows (``auto``: the better of ``curvature`` and ``linear`` on the nominal residual)
     and the errors-in-variables model of the steering the rows do not show (:mod:`.noise`)."""
@@ -670,7 +290,7 @@ def _prepare_model(model: ResidualModel, config: DiscrepancyConfig, notes: list[
 
     data = model.data
     if data.kind != "camera":
-        return _imu_steering(config), None
+        return imu_steering(config), None
     mode = config.steering
     nominal = model.converged()
     dt_row = float(np.median(np.diff(data.t)))
@@ -691,46 +311,3 @@ def _prepare_model(model: ResidualModel, config: DiscrepancyConfig, notes: list[
             "curvature and linear)"
         )
     return mode, None
-
-
-def _evidence(sel: SelectionResult, effect: CandidateEffect, n: int, config: DiscrepancyConfig) -> dict:
-    """Why ``effect`` was accepted: its round's statistics and the runner-up."""
-    for st in sel.steps:
-        if st.accepted == effect.name:
-            info = st.tried[effect.name]
-            k = effect.n_parameters
-            fitted = {name: v for name, v in st.tried.items() if v.get("fitted") and name != effect.name}
-            runner = min(fitted, key=lambda nm: fitted[nm]["chi2"]) if fitted else None
-            out = {
-                "round": st.round,
-                "chi2_before": st.chi2_before,
-                "chi2_with_effect": info["chi2"],
-                "likelihood_ratio": info["lr"],
-                "p_value": info["p_value"],
-                "delta_bic": info["delta_bic"],
-                "acceptance_threshold": acceptance_threshold(k, n, config.alpha / len(st.tried)),
-                "runner_up": None,
-            }
-            if "inflation" in info:
-                out["likelihood_ratio_raw"] = info["lr_raw"]
-                out["inflation"] = info["inflation"]
-            if "signature_correlation" in info:
-                out["signature_correlation"] = info["signature_correlation"]
-            if runner is not None:
-                out["runner_up"] = {
-                    "name": runner,
-                    "chi2": fitted[runner]["chi2"],
-                    "delta_bic_vs_accepted": (fitted[runner]["chi2"] + fitted[runner]["k"] * math.log(n))
-                    - (info["chi2"] + k * math.log(n)),
-                }
-            return out
-    return {}
-
-
-def _vehicle_source() -> str:
-    """Where the nominal vehicle came from: the CLI's ``--vehicle`` path or its built-in default
-    (recorded by ``vehicle_from_args``), else a caller of the library."""
-    from ..io import current_run_context
-
-    info = current_run_context().info.get("vehicle")
-    return str(info["source"]) if isinstance(info, dict) and "source" in info else "given by the caller (VehicleParams)"
