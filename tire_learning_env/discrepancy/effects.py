@@ -75,6 +75,7 @@ which a tire curve learned as a function of slip largely absorbs.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -147,6 +148,12 @@ class CandidateEffect:
         Starting points tried by the fit (the best by cost is refined).
     needs_speed_variation : bool
         Only identifiable when the speed varies in the log.
+    kink_start : callable, optional
+        ``kink_start(values, data) -> values or None``: for an effect with a limit (a ``min``), a start at
+        which the limit is active when the fitted ``values`` leave it inactive on this log (``data``,
+        :class:`.data.ModelData`). An inactive limit has no gradient, so the fit cannot find out from there
+        whether an active one fits better; :func:`.selection.fit_effects` then fits again from this start and
+        keeps the better fit.
     """
 
     name: str
@@ -159,6 +166,7 @@ class CandidateEffect:
     absent: tuple[float, ...]
     starts: tuple[tuple[float, ...], ...]
     needs_speed_variation: bool = False
+    kink_start: Callable[[NDArray, Any], NDArray | None] | None = None
 
     @property
     def n_parameters(self) -> int:
@@ -187,6 +195,19 @@ class CandidateEffect:
     def size(self, values) -> NDArray:
         """Deviation from absence per parameter (the 'effect size')."""
         return np.atleast_1d(np.asarray(values, dtype=float)) - np.asarray(self.absent)
+
+
+def _superelevation_cap_start(values: NDArray, data) -> NDArray | None:
+    """A start whose cap binds in the log's sharpest curves (0.9 x rate x largest |kappa|) when the fitted cap is
+    above every bank the fitted rate gives on this log (None when it binds, or without superelevation)."""
+    rate, cap = float(values[0]), float(values[1])
+    kappa = getattr(data, "kappa", None)
+    if kappa is None or not len(kappa) or rate <= 0.0:
+        return None
+    reach = rate * float(np.max(np.abs(kappa)))
+    if not reach > 0.0 or cap < reach:
+        return None
+    return np.array([rate, max(0.9 * reach, 0.005)])
 
 
 def _one(name, description, parameter, unit, index, bounds, scale, starts, absent=0.0, speed=False) -> CandidateEffect:
@@ -234,6 +255,7 @@ LIBRARY: tuple[CandidateEffect, ...] = (
         # the cap has no gradient where it does not bind: a grid of starts over the road-design range
         # (caps 1.7-6.9 deg, reached from R = 100-2000 m) so the fit starts in the right basin
         tuple((r, c) for r in (6.0, 12.0, 25.0, 50.0) for c in (0.03, 0.045, 0.06, 0.09, 0.12)),
+        kink_start=_superelevation_cap_start,
     ),
     _one("camera_heading_drift", "camera heading bias that drifts slowly: measured e2 = true e2 + drift_rate "
          "(t - t_mid), t_mid the middle of the log, on top of any constant camera_heading_bias (e.g. a camera mount "

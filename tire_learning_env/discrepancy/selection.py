@@ -198,6 +198,7 @@ def fit_effects(
     ftol: float = 1e-8,
     xtol: float = 1e-6,
     linearised: bool = False,
+    kink_restart: bool = True,
 ) -> CandidateFit:
     """Fit the parameters of ``effects`` jointly (others held at ``theta``) by scipy least squares.
 
@@ -217,7 +218,9 @@ def fit_effects(
     (three simulations per window instead of about fifteen for converged states; the cost is
     then a smooth deterministic function of the parameters); the optimum is re-evaluated with
     converged states, and the run repeated from there while that lowers the cost, so the
-    result is compared on converged residuals as before.
+    result is compared on converged residuals as before. ``kink_restart``: a single effect with a
+    ``kink_start`` (:class:`.effects.CandidateEffect`) whose fitted limit is inactive on this log is fitted
+    again from a start where it is active, and the better fit is returned.
     """
     effects = tuple(effects)
     lo = np.concatenate([[b[0] / s for b, s in zip(e.bounds, e.scale)] for e in effects])
@@ -308,7 +311,20 @@ def fit_effects(
         stderr.append(se[i : i + k] * np.asarray(e.scale))
         i += k
     hess = None if res_jac is None else res_jac.T @ res_jac
-    return CandidateFit(effects, values, stderr, final, nfev, hess, np.asarray(z, dtype=float))
+    fit = CandidateFit(effects, values, stderr, final, nfev, hess, np.asarray(z, dtype=float))
+    if kink_restart and len(effects) == 1 and effects[0].kink_start is not None:
+        start = effects[0].kink_start(values[0], model.data)
+        if start is not None:
+            other = fit_effects(
+                model, effects, theta, starts=[start], max_nfev=max_nfev, outer=outer, reference=start_eval,
+                warm_start=warm_start, diff_step=diff_step, jac=jac, ftol=ftol, xtol=xtol, linearised=linearised,
+                kink_restart=False,
+            )  # fmt: skip
+            other.nfev += fit.nfev
+            if other.chi2 < fit.chi2:
+                return other
+            fit.nfev = other.nfev
+    return fit
 
 
 def score_statistic(
