@@ -156,6 +156,7 @@ class Accumulator(NamedTuple):
     hess: np.ndarray  # (nw, nw) sum Psi^T S^-1 Psi
     grad: np.ndarray  # (nw,) sum Psi^T S^-1 nu
     stats: np.ndarray  # (4,) sum nu^T S^-1 nu, updates, dof, sum log det S
+    innov: np.ndarray  # (n rows, 2) the camera innovations (e1, e2) of the fit, by frame row; (0, 2): not kept
 
 
 class Outputs(NamedTuple):
@@ -1013,6 +1014,9 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
                 if S.record:
                     out.nu[k, CH_E1] = n0
                     out.nu[k, CH_E2] = n1
+                if accumulate and k < acc.innov.shape[0]:
+                    acc.innov[k, 0] = n0
+                    acc.innov[k, 1] = n1
                 nis_row += nis
                 dof_row += dof
                 _health_push(st, tk, nis, dof, S, M)
@@ -1076,6 +1080,9 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
                                               acc_f, acc, out.score, nf, wk)  # fmt: skip
                     if dof > 0:
                         _health_push(st, t[nf], nis, dof, S, M)
+                        if acc_f and nf < acc.innov.shape[0]:
+                            acc.innov[nf, 0] = n0
+                            acc.innov[nf, 1] = n1
                     nf = _next_frame(z, nf + 1)
                 if k < n - 1 or predict_last:
                     predict(st, dt_row - done, delta[k] + dd * done, dd, vx[k] + ax[k] * done, ax[k], kappa[k] + kd * done,

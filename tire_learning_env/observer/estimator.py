@@ -708,7 +708,9 @@ def estimate(
     offline = None
     if config.offline:
         t0 = time.perf_counter()
-        fit = refine(obs, rows, online_w, prior_cov=obs.prior_covariance(offline=True))
+        # camera logs: a process-noise stage must also leave the camera innovations white (offline.refine)
+        white = model.name == "camera"
+        fit = refine(obs, rows, online_w, prior_cov=obs.prior_covariance(offline=True), whiteness=white)
         if model.uses_camera and latency_given is None:  # the latency again, from the refined curve
             first = obs.latency
             obs.set_force_error(fit.force_error)
@@ -725,7 +727,7 @@ def estimate(
                 # the stage reached and the next one down (the rest of the continuation was measured to cost
                 # a second whole refinement on a 30 min log for no change of the answer)
                 fit = refine(obs, rows, fit.weights, prior_cov=obs.prior_covariance(offline=True),
-                             force_errors=stages[:2])  # fmt: skip
+                             force_errors=stages[:2], whiteness=white)  # fmt: skip
             else:
                 obs.latency = first
                 if abs(lat2 - first) > 1e-9:

@@ -461,7 +461,7 @@ class NeuroAdaptiveObserver:
                            gate=gate, compute_std=compute_std, store_weights=store_weights, kalman=kalman,
                            record=record, shift_frames=shift_frames)  # fmt: skip
         nr = n if record else 0
-        acc = accumulator if accumulator is not None else K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4))
+        acc = accumulator if accumulator is not None else K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4), np.empty((0, 2)))
         out = K.Outputs(
             np.empty((nr, nx)), np.empty((nr, 2)), np.empty((nr, 2)), np.empty((nr, 2)),
             np.empty((nr if store_weights else 0, nw)), np.empty((nr if compute_std else 0, nx)), np.empty((nr, 4)),
@@ -493,7 +493,7 @@ class NeuroAdaptiveObserver:
             nw = self.n_weights
             self._block = {
                 "A": Lam, "c": Lam @ self.initial_weights, "w_run": w,
-                "acc": K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4)),
+                "acc": K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4), np.empty((0, 2))),
                 "t_end": None, "healthy": True, "blocks": 0, "used": 0,
             }  # fmt: skip
             self._state.pw[:] = P0
@@ -532,7 +532,7 @@ class NeuroAdaptiveObserver:
             elif nis < 1.0:
                 self._adapt_force_error(max(self.force_error / 1.5, lo_fe))
         b["w_run"] = self._state.w.copy()
-        b["acc"] = K.Accumulator(np.zeros_like(acc.hess), np.zeros_like(acc.grad), np.zeros(4))
+        b["acc"] = K.Accumulator(np.zeros_like(acc.hess), np.zeros_like(acc.grad), np.zeros(4), np.empty((0, 2)))
         b["healthy"] = True
         b["t_end"] += self.adaptation.block_s
 

@@ -145,9 +145,9 @@ def yaw_dynamics_check(observer: NeuroAdaptiveObserver, sensors: dict, fit: Offl
     vehicle = observer.vehicle
     decrease, changes = {}, []
 
-    def refit(f: float) -> None:
+    def refit(f: float, n_iter: int = max_iter) -> None:
         observer.set_vehicle(vehicle.replace(Iz=vehicle.Iz * f))
-        w_f, _, costs, _ = _gauss_newton(observer, rows, w_same, w0, Lam, lo, hi, fit_from, gate, max_iter, tol,
+        w_f, _, costs, _ = _gauss_newton(observer, rows, w_same, w0, Lam, lo, hi, fit_from, gate, n_iter, tol,
                                          min_decrease)  # fmt: skip
         decrease[f"{f:.4g}"] = float(c_same - costs[-1])
         changes.append(w_f - w_same)
@@ -164,7 +164,7 @@ def yaw_dynamics_check(observer: NeuroAdaptiveObserver, sensors: dict, fit: Offl
             x = -slope / curv if curv > 0 else np.sign(-slope) * np.inf
             x = float(np.clip(x, -np.log(max_factor), np.log(max_factor)))
             if abs(abs(x) - h) > 0.03:
-                refit(float(np.exp(x)))
+                refit(float(np.exp(x)), 3 * max_iter)  # the answer the band reaches for: converged
     finally:
         observer.set_vehicle(vehicle)
         observer.reset(weights=fit.weights)
