@@ -91,14 +91,18 @@ def test_linear_kalman_filter_is_exact_on_a_linear_tire_plant():
 
 
 # ---- the blend ---------------------------------------------------------------------------------
-def test_mode_probabilities_follow_the_smaller_prediction_error_and_the_mixture_is_convex():
-    rng = np.random.default_rng(0)
-    n = 4000
+def _switching_innovations(seed, n=4000):
+    """Two modes' white innovations (std 1 and 1.5) at 100 Hz; the better mode changes at 20 s."""
+    rng = np.random.default_rng(seed)
     t = np.arange(n) * 0.01
     small, large = rng.normal(0, 1.0, (n, 2)), rng.normal(0, 1.5, (n, 2))
-    # the better mode changes half way through
-    a = np.where((t < 20)[:, None], small, large)
-    b = np.where((t < 20)[:, None], large, small)
+    first = (t < 20)[:, None]
+    return t, np.where(first, small, large), np.where(first, large, small)
+
+
+def test_mode_probabilities_follow_the_smaller_prediction_error_and_the_mixture_is_convex():
+    t, a, b = _switching_innovations(0)
+    n = len(t)
     mu, var = mode_probabilities(t, [a, b], BlendParams(prior_observer=0.5))
     assert mu.shape == (n, 2) and np.allclose(mu.sum(axis=1), 1.0)
     assert np.all(mu[:100, 0] == 0.5)  # warm-up: no variances measured yet
@@ -112,12 +116,7 @@ def test_mode_probabilities_follow_the_smaller_prediction_error_and_the_mixture_
 
 
 def test_smoothed_mode_probabilities_use_the_evidence_after_each_row():
-    rng = np.random.default_rng(1)
-    n = 4000
-    t = np.arange(n) * 0.01
-    small, large = rng.normal(0, 1.0, (n, 2)), rng.normal(0, 1.5, (n, 2))
-    a = np.where((t < 20)[:, None], small, large)
-    b = np.where((t < 20)[:, None], large, small)
+    t, a, b = _switching_innovations(1)
     mu_f, _ = mode_probabilities(t, [a, b])
     mu_s, var = mode_probabilities(t, [a, b], smooth=True)
     assert np.allclose(mu_s.sum(axis=1), 1.0) and np.isfinite(var).all()

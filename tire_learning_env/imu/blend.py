@@ -92,6 +92,20 @@ class BlendParams(_Params):
 
 
 @njit(cache=True)
+def _switch(logmu, dt, sojourn):
+    """Markov switching over ``dt`` [s] (mixing of the mode probabilities, ``p_switch = dt / sojourn``
+    shared among the other modes); log probabilities in and out."""
+    M = logmu.shape[0]
+    if M < 2 or not dt > 0.0:
+        return logmu
+    p = min(dt / sojourn, 0.5)
+    mu = np.exp(logmu - logmu.max())
+    mu /= mu.sum()
+    c = (1.0 - p) * mu + p * (1.0 - mu) / (M - 1)
+    return np.log(np.maximum(c, 1e-300))
+
+
+@njit(cache=True)
 def _mode_kernel(t, nu, tau, sojourn, warmup, mu0, out_mu, out_var, out_ll):
     """``nu`` (M, n, C) innovations (NaN: none); fills ``out_mu`` (n, M), the predictive
     innovation variances ``out_var`` (M, n, C) used at each row and the rows' log likelihoods
@@ -103,13 +117,7 @@ def _mode_kernel(t, nu, tau, sojourn, warmup, mu0, out_mu, out_var, out_ll):
     logmu = np.log(mu0)
     for k in range(n):
         dt = t[k] - t[k - 1] if k > 0 else 0.0
-        # Markov switching (mixing of the mode probabilities)
-        if M > 1 and dt > 0.0:
-            p = min(dt / sojourn, 0.5)
-            mu = np.exp(logmu - logmu.max())
-            mu /= mu.sum()
-            c = (1.0 - p) * mu + p * (1.0 - mu) / (M - 1)
-            logmu = np.log(np.maximum(c, 1e-300))
+        logmu = _switch(logmu, dt, sojourn)
         # decay the variance statistics
         a = math.exp(-dt / tau) if dt > 0.0 else 1.0
         for j in range(M):
@@ -219,12 +227,7 @@ def _filter_given_loglik(t, ll, sojourn, mu0, out_mu):
     logmu = np.log(mu0)
     for k in range(n):
         dt = t[k] - t[k - 1] if k > 0 else 0.0
-        if M > 1 and dt > 0.0:
-            p = min(dt / sojourn, 0.5)
-            mu = np.exp(logmu - logmu.max())
-            mu /= mu.sum()
-            c = (1.0 - p) * mu + p * (1.0 - mu) / (M - 1)
-            logmu = np.log(np.maximum(c, 1e-300))
+        logmu = _switch(logmu, dt, sojourn)
         logmu = logmu + ll[k]
         logmu -= logmu.max()
         mu = np.exp(logmu)
