@@ -35,6 +35,14 @@ exactly what it is on its own, so the mixture is a convex combination of two est
 its error is at most the larger of theirs at every instant, and close to the smaller one
 wherever the prediction errors tell them apart.
 
+Offline. The reported estimate comes from the refined observer pass, which already used the
+whole log; its mode probabilities are the fixed-interval smoothed ones, ``p(mode at k | all
+rows)`` (forward-backward recursion of the same Markov chain, ``smooth=True``), with each row's
+innovation variances measured on both sides of it. The first rows are then judged with the
+evidence that follows them instead of sitting at the prior during the warm-up, which is
+exactly when the KF (started at zero with a huge covariance) is at its worst. The causal blend
+keeps the forward recursion above.
+
 Limits. Prediction error is evidence about the IMU channels, not about the sideslip itself:
 two filters that predict ``a_y`` and ``r`` equally well but disagree on the sideslip get
 equal weights (the sideslip error is then at most the average of theirs).

@@ -25,7 +25,8 @@ Steps of :func:`estimate_imu` (the ``estimate`` command runs :func:`estimate_imu
 4. **Blend** (:mod:`.blend`): interacting-multiple-model probabilities of the two from their
    ``a_y``/``r`` innovations; the reported states are the mixture, so wherever the learned
    curve predicts the IMU worse than fixed linear tires the estimate falls back to the KF.
-   Done for the causal pass (``online``) and for the refined pass (reported).
+   Done for the causal pass (``online``, causal probabilities) and for the refined pass
+   (reported; smoothed probabilities, since that pass used the whole log anyway).
 """
 
 from __future__ import annotations
