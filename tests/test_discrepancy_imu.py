@@ -39,7 +39,7 @@ from tire_learning_env.discrepancy.imu_truth import (
     simulate_hidden_imu,
 )
 from tire_learning_env.discrepancy.residuals import ResidualModel
-from tire_learning_env.discrepancy.selection import long_run_variance, signature_correlation
+from tire_learning_env.discrepancy.criteria import long_run_variance, signature_correlation
 from tire_learning_env.io import DrivingLog, LogFormatError, read_log, write_log
 from tire_learning_env.params import ParameterError, TireParams
 from tire_learning_env.tires import axle_tires

@@ -71,7 +71,7 @@ class DiscrepancyConfig(_Params):
         Seed of the Monte Carlo null distributions.
     correlation_correction : {"auto", "on", "off"}
         Divide every likelihood-ratio statistic by the residual's variance inflation from
-        its correlation in time (:func:`.selection.long_run_variance`). ``auto``: on for
+        its correlation in time (:func:`.criteria.long_run_variance`). ``auto``: on for
         IMU-only logs (a real car's residual is never white at 100 Hz), off for camera logs.
     """
 

@@ -15,8 +15,9 @@ import math
 from numpy.typing import NDArray
 
 from .config import DiscrepancyConfig
+from .criteria import acceptance_threshold
 from .effects import IMU_CONFOUNDED, CandidateEffect, library_for
-from .selection import SelectionResult, acceptance_threshold
+from .selection import SelectionResult
 
 __all__ = ["effect_entry", "evidence_of", "ambiguous_alternatives", "selection_kind"]
 

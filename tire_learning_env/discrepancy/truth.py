@@ -4,33 +4,11 @@ Kept so that code written against ``tire_learning_env.discrepancy.truth`` (the n
 scripts) keeps working; new code imports from :mod:`tire_learning_env.scenarios`.
 """
 
-from ..scenarios import (  # noqa: F401
-    HIDDEN_EFFECTS,
-    SCENARIO_ROADS,
-    SPEED_PROFILES,
-    CurvesRoad,
-    EffectPlant,
-    HiddenEffects,
-    IdentificationRoad,
-    parse_hidden_effects,
-    simulate_hidden,
-    speed_profile,
-    steering_nonlinearity_gain,
-)
+from .. import scenarios as _scenarios
+from ..scenarios import *  # noqa: F401,F403  (the public names of the scenarios module)
+from ..scenarios import SCENARIO_ROADS, steering_nonlinearity_gain  # noqa: F401
 
 #: the test roads under their former name
 DISCREPANCY_ROADS = SCENARIO_ROADS
 
-__all__ = [
-    "simulate_hidden",
-    "IdentificationRoad",
-    "CurvesRoad",
-    "DISCREPANCY_ROADS",
-    "HIDDEN_EFFECTS",
-    "HiddenEffects",
-    "parse_hidden_effects",
-    "EffectPlant",
-    "SPEED_PROFILES",
-    "speed_profile",
-    "steering_nonlinearity_gain",
-]
+__all__ = [*_scenarios.__all__, "DISCREPANCY_ROADS", "steering_nonlinearity_gain"]
