@@ -3,11 +3,15 @@
 - :mod:`.model`: the vehicle model and the measurement models (camera, IMU, both);
 - :mod:`.basis`: the soft-clip tire-force basis (eq. 30);
 - :mod:`.gains`: certified gains from vertex LMIs (one pipeline for every measurement model);
+  :mod:`.certificate`: what it returns (the gains and their certificates);
 - :mod:`._kernel`: the compiled estimator loop;
 - :mod:`.neuro_adaptive`: :class:`NeuroAdaptiveObserver` (``reset``/``predict``/``update``/``run``);
-- :mod:`.calibration`: noise measured from the log;
+  :mod:`.settings`: its settings; :mod:`.rows`: sensor columns to the kernel's rows;
+- :mod:`.calibration`: noise measured from the log; :mod:`.latency`: the camera latency from the log;
 - :mod:`.offline`: prediction-error refinement over a whole log, bands, verdict;
-- :mod:`.estimator`: :func:`estimate` (all of it in one call) and :class:`EstimationResult`;
+  :mod:`.readout`: the curve and stiffness read-outs of the weights;
+- :mod:`.estimator`: :func:`estimate` (all of it in one call); :mod:`.config`: :class:`ObserverConfig`;
+  :mod:`.result`: :class:`EstimationResult`;
 - :mod:`.warm_start`: the paper's least-squares warm start (SPEC §4).
 """
 

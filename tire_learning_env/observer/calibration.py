@@ -18,17 +18,29 @@ unknown latency, and it is exact for irregular sampling; the vehicle model is th
 designed for the noise it measured.
 
 Latency is a property of the camera relative to the vehicle's response, so it needs the
-model: :mod:`.estimator` profiles the prediction-error cost over candidate latencies.
+model: :mod:`.latency` profiles the prediction-error cost over candidate latencies.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+if TYPE_CHECKING:
+    from ..params import CameraParams
+    from .config import ObserverConfig
+    from .model import MeasurementModel
+
 __all__ = ["NoiseEstimate", "estimate_noise_std", "sample_period"]
+
+#: smallest noise std used per channel (e1 [m], e2 [rad], a_y [m/s^2], r [rad/s]): resolution
+NOISE_FLOOR = np.array([1e-4, 1e-4, 0.01, 1e-4])
+#: noise assumed when a channel has too few samples to measure it
+NOISE_DEFAULT = np.array([0.01, 0.005, 0.5, 0.005])
 
 
 @dataclass
@@ -128,3 +140,37 @@ def sample_period(t: ArrayLike, z: ArrayLike | None = None) -> float:
     if len(t) < 2:
         return float("nan")
     return float(np.median(np.diff(t)))
+
+
+def _noise(config: ObserverConfig, rows: Mapping, model: MeasurementModel, camera: CameraParams | None) -> tuple[NDArray, dict]:
+    """Noise std of the 4 channels and how each was obtained."""
+    out = NOISE_DEFAULT.copy()
+    info: dict = {}
+    t = np.asarray(rows["t"], dtype=float)
+    given = {}
+    if config.camera_noise is not None:
+        given["camera"] = config.camera_noise
+    elif camera is not None:
+        given["camera"] = tuple(camera.noise_std)
+    if config.imu_noise is not None:
+        given["imu"] = config.imu_noise
+    for group, chans, idx in (("camera", ("e1", "e2"), (0, 1)), ("imu", ("ay", "yaw_rate"), (2, 3))):
+        used = model.uses_camera if group == "camera" else model.uses_imu
+        if not used:
+            continue
+        if group in given:
+            out[list(idx)] = given[group]
+            info[group] = {"source": "given", "std": [float(v) for v in given[group]]}
+            continue
+        est = {}
+        for c, i in zip(chans, idx):
+            window = imu_noise_window(t, rows[c]) if group == "imu" else 9
+            e = estimate_noise_std(t, rows[c], window=window)
+            est[c] = dict(e.to_dict(), window_samples=window)
+            if math.isfinite(e.std):
+                out[i] = e.std
+        info[group] = {"source": "estimated from the log (local polynomial residuals)", "channels": est}
+    floored = np.maximum(out, NOISE_FLOOR)
+    info["std_used"] = dict(zip(("e1_m", "e2_rad", "ay_mps2", "yaw_rate_radps"), floored.tolist()))
+    info["floor"] = NOISE_FLOOR.tolist()
+    return floored, info

@@ -25,170 +25,28 @@ arrays of rows in compiled code).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import ClassVar, Mapping
+from typing import Mapping
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..params import ParameterError, VehicleParams, _Params
+from ..params import ParameterError, VehicleParams
 from . import _kernel as K
 from .basis import SoftClipBasis
 from .gains import ObserverGains
-from .model import MeasurementModel, StateIndex, check_sensor_columns
+from .model import MeasurementModel, StateIndex
+from .rows import CHANNELS, _KernelRows, sensor_rows
+from .settings import AdaptationParams, HealthParams
 from .trace import HEALTH_NAMES, EstimateTrace
+
+# names this module imported before its split (still importable from here)
+from ..params import _Params  # noqa: F401
+from .model import check_sensor_columns  # noqa: F401
 
 __all__ = ["NeuroAdaptiveObserver", "AdaptationParams", "HealthParams", "sensor_rows", "CHANNELS", "N_BIAS_PARAMS"]
 
-#: measurement channels in the order of the kernel's ``z`` columns
-CHANNELS = ("e1", "e2", "ay", "yaw_rate")
 #: sensor offsets appended to the weights when the IMU is read: a_y [m/s^2], yaw rate [rad/s]
 N_BIAS_PARAMS = 2
-
-
-@dataclass(frozen=True)
-class AdaptationParams(_Params):
-    """Weight-adaptation settings (weight standard deviations in units of the basis weight range).
-
-    Parameters
-    ----------
-    initial_std : float
-        Prior std of every tire weight, ``P_w(0) = (initial_std r)^2 corr`` with ``r`` the
-        basis' :attr:`~.basis.SoftClipBasis.weight_range` and ``corr`` its smooth-curve prior.
-    random_walk : float
-        Weight random walk [1/sqrt(s)] in the same unit (0: a stationary tire).
-    max_std : float
-        Cap of each weight's std (``P_w`` stays bounded without excitation).
-    settle_time_constants : float
-        Weights are frozen after a reset until the initial state error has decayed by
-        ``exp(-settle_time_constants)`` at the certified rate (not learned as a tire force).
-    prior_length : float
-        Length scale [deg of slip] of the smooth slope prior
-        (:meth:`~.basis.SoftClipBasis.slope_prior`).
-    prior_symmetry : float
-        Weight of its left/right mirror term, in [0, 1).
-    online_prior_length : float, optional
-        Length scale [deg] of the prior the *causal* pass starts from (``None``: ``prior_length``).
-        The offline fit always uses ``prior_length``. With a lane camera the causal pass is
-        better off without the smooth prior: its correlations spread the noisy early updates
-        over the whole curve (measured on 60 s of lane changes with the paper's noise: rear
-        stiffness +34 % at ``prior_length`` 1 deg, +11 % at 0; with a nominal 12 % off,
-        +17.5 % against -1.4 %), while the offline fit, which sees all data at once, gains
-        from it (-0.30/-0.03 % against +0.41/+1.02 %).
-    causal_update : {"block", "rls"}
-        How the causal pass learns. ``"block"`` (default): the weights are held for
-        ``block_s`` seconds while the Kalman predictor of the model accumulates the
-        prediction-error normal equations of the block; at the block's end one Gauss-Newton
-        step of the fit over *all the data so far* (every block's quadratic model, around
-        the weights it was run with, plus the prior) gives the new weights and their
-        covariance: the offline fit, made recursive. ``"rls"``: per-measurement recursive
-        least squares with the certified gain (the paper's update law). Measured with
-        ``benchmarks/bench_causal_drift.py``: the per-measurement law drifts on a straight
-        road driven in closed loop (rear stiffness +92 % at 60 s: the driver's steering
-        answers the camera noise, and the certified gain's innovations are not white, so the
-        regressor correlates with them); the block law does not. The block law corrects the
-        state with the Kalman gain of its predictor (a Riccati recursion), not the LMI-certified
-        gain: with the certified gain in its place the same benchmark read +39 / +89 % (straight)
-        and +3.4 / +37 % (lane changes) at 60 s, and the e1 error doubled (7.9 against 4.4 mm),
-        because the certified gain's innovations are not white.
-    block_s : float
-        Block length of the ``"block"`` law [s].
-    sensor_offsets : bool
-        Learn constant offsets of the IMU's ``a_y`` and yaw rate (when the IMU is read).
-    ay_offset_std, yaw_rate_offset_std : float
-        Their prior std [m/s^2], [rad/s] (a 1 deg mounting tilt is 0.17 m/s^2; a MEMS gyro
-        offset a few mrad/s).
-    """
-
-    initial_std: float = 0.5
-    random_walk: float = 0.0
-    max_std: float = 1.0
-    settle_time_constants: float = 3.0
-    prior_length: float = 1.0
-    prior_symmetry: float = 0.8
-    online_prior_length: float | None = None
-    causal_update: str = "block"
-    block_s: float = 2.0
-    sensor_offsets: bool = True
-    ay_offset_std: float = 0.2
-    yaw_rate_offset_std: float = 0.005
-
-    _positive: ClassVar[tuple[str, ...]] = ("initial_std", "max_std", "ay_offset_std", "yaw_rate_offset_std", "block_s")
-    _non_negative: ClassVar[tuple[str, ...]] = ("random_walk", "settle_time_constants", "prior_length", "prior_symmetry")
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.causal_update not in ("block", "rls"):
-            raise ParameterError(f"AdaptationParams.causal_update must be 'block' or 'rls', got {self.causal_update!r}")
-
-
-@dataclass(frozen=True)
-class HealthParams(_Params):
-    """Health-flag settings.
-
-    Parameters
-    ----------
-    window_s : float
-        NIS window length [s] (at least ``min_updates`` updates).
-    min_updates : int
-        Smallest window [updates].
-    nis_factor : float
-        The window's NIS sum may exceed the chi-square bound (probability 1e-4 under a
-        consistent model) by this factor before the flag trips: the model of the noise is
-        estimated, not known, so a consistent estimator must not trip on small errors in it.
-    gap_frames : float
-        The flag trips when no measurement arrived for this many sample periods ...
-    min_gap_s : float
-        ... and at least this long [s].
-    rollback_s : float
-        On a trip the weights return to a checkpoint at least this old [s].
-    """
-
-    window_s: float = 2.0
-    min_updates: int = 10
-    nis_factor: float = 3.0
-    gap_frames: float = 10.0
-    min_gap_s: float = 0.5
-    rollback_s: float = 2.0
-
-    _positive: ClassVar[tuple[str, ...]] = ("window_s", "min_updates", "nis_factor", "gap_frames", "min_gap_s", "rollback_s")
-
-
-class _KernelRows(dict):
-    """Rows already in the kernel's layout (:func:`sensor_rows`): :meth:`NeuroAdaptiveObserver.run`
-    skips the validation (the block law's pieces of one validated call)."""
-
-
-def sensor_rows(sensors: Mapping[str, ArrayLike], model: MeasurementModel) -> dict[str, NDArray]:
-    """The kernel's row arrays from sensor columns: ``t, delta, vx, ax, kappa`` and ``z`` (n, 4).
-
-    ``kappa`` comes from ``kappa`` or ``psi_dot_des / vx``; channels the model does not read
-    are NaN. Ground truth (``true_*``) is refused.
-    """
-    need = ["t", "delta", "vx"]
-    if model.uses_camera:
-        need += ["e1", "e2"] + ([] if "psi_dot_des" in sensors else ["kappa"])
-    if model.uses_imu:
-        need += ["ay", "yaw_rate"]
-    check_sensor_columns(sensors, need, f"{model.name} estimation")
-    get = lambda k: np.ascontiguousarray(np.asarray(sensors[k], dtype=float))  # noqa: E731
-    t, delta, vx = get("t"), get("delta"), get("vx")
-    n = len(t)
-    if not (len(delta) == len(vx) == n):
-        raise ParameterError("sensor columns must have equal lengths")
-    ax = get("ax") if "ax" in sensors else np.zeros(n)
-    ax = np.where(np.isfinite(ax), ax, 0.0)
-    if model.uses_camera:
-        kappa = get("kappa") if "kappa" in sensors else get("psi_dot_des") / np.maximum(vx, 1e-3)
-        kappa = np.where(np.isfinite(kappa), kappa, 0.0)
-    else:
-        kappa = np.zeros(n)
-    z = np.full((n, 4), np.nan)
-    if model.uses_camera:
-        z[:, 0], z[:, 1] = get("e1"), get("e2")
-    if model.uses_imu:
-        z[:, 2], z[:, 3] = get("ay"), get("yaw_rate")
-    return {"t": t, "delta": delta, "vx": vx, "ax": ax, "kappa": np.ascontiguousarray(kappa), "z": z}
 
 
 class NeuroAdaptiveObserver:
