@@ -390,7 +390,7 @@ def refine(
         frac = force_errors[i]
         observer.set_force_error(frac * load)
         w_fit, acc, costs, it = _gauss_newton(observer, rows, w_from, w0, Lam, lo, hi, start, gate, n_iter, tol, dec,
-                                              innovations=whiteness)  # fmt: skip
+                                              innovations=whiteness and phase == "continuation")  # fmt: skip
         iters += it
         all_costs += costs
         nis = _nis_per_dof(acc)
@@ -575,5 +575,4 @@ def pem_cost(observer: NeuroAdaptiveObserver, sensors: dict, w: NDArray, prior_c
         return J, int(acc.stats[1])
 
 
-__all__ += ["pem_cost", "axle_index", "stiffness_readout", "calibrate_force_error", "select_prior_length",
-            "steering_hold_sensitivity"]
+__all__ += ["pem_cost", "axle_index", "stiffness_readout", "calibrate_force_error", "select_prior_length"]
