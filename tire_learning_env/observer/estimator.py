@@ -45,7 +45,7 @@ from .gains import synthesize_gains
 from .latency import _estimate_latency, _profile_window  # noqa: F401  (_profile_window: re-exported)
 from .model import MeasurementModel, measurement_model
 from .neuro_adaptive import HealthParams, NeuroAdaptiveObserver
-from .offline import refine, select_prior_length
+from .offline import hold_fit, refine, select_prior_length
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
 from .sensitivity import steering_hold_sensitivity, yaw_dynamics_check
 
@@ -218,9 +218,7 @@ def _lower_posterior_cost(obs: NeuroAdaptiveObserver, rows: dict, from_causal, f
     best.start = {"kept": "prior mean" if best is from_prior else "causal end weights",
                   "posterior_cost": {"causal_end_weights": costs[0], "prior_mean": costs[1]},
                   "at_force_error_N": force_error}  # fmt: skip
-    obs.set_force_error(best.force_error)
-    obs.reset(weights=best.weights)
-    obs._state.pw[:] = best.covariance
+    hold_fit(obs, best)
     return best
 
 
@@ -347,9 +345,7 @@ def estimate(
                     calibration["latency"]["latency_s"] = float(first)
                     calibration["latency"]["kept_first"] = (f"the refined profile's {lat2 * 1e3:.1f} ms was not "
                                                             "significantly better; the fit kept the first estimate")
-                obs.set_force_error(fit.force_error)
-                obs.reset(weights=fit.weights)
-                obs._state.pw[:] = fit.covariance
+                hold_fit(obs, fit)
         # the prior's length: kept (1 deg unless given), its plausible neighbours' answers in the bands
         fit, calibration["prior_length"] = select_prior_length(obs, rows, fit, choose=False)
         # the other steering hold: how much the answer leans on what the steering did between rows (with

@@ -42,7 +42,8 @@ from .neuro_adaptive import NeuroAdaptiveObserver, axle_index
 from .readout import curve_gradient, stiffness_gradient, stiffness_readout
 from .trace import EstimateTrace
 
-__all__ = ["OfflineFit", "refine", "stiffness_gradient", "curve_gradient", "newey_west_variance", "innovation_whiteness"]
+__all__ = ["OfflineFit", "refine", "stiffness_gradient", "curve_gradient", "newey_west_variance", "innovation_whiteness",
+           "hold_fit"]
 
 
 def newey_west_variance(u: NDArray, max_lag: int | None = None) -> NDArray:
@@ -389,19 +390,22 @@ def refine(
         nonlocal iters, all_costs
         frac = force_errors[i]
         observer.set_force_error(frac * load)
+        tested = whiteness and phase == "continuation"
         w_fit, acc, costs, it = _gauss_newton(observer, rows, w_from, w0, Lam, lo, hi, start, gate, n_iter, tol, dec,
-                                              innovations=whiteness and phase == "continuation")  # fmt: skip
+                                              innovations=tested)  # fmt: skip
         iters += it
         all_costs += costs
-        nis = _nis_per_dof(acc)
-        stage = {"force_error_N": frac * load, "nis_per_dof": nis, "iterations": it, "fit": phase}
-        white = None
-        if whiteness and phase == "continuation":
-            test = innovation_whiteness(acc.innov)
-            stage["ljung_box_q"], stage["white"] = test["q"], test["white"]
-            white = test["white"]
+        return w_fit, _nis_per_dof(acc), record(frac * load, acc, it, phase, tested)
+
+    def record(force_error, acc, it, phase, tested):
+        """Append the stage's record; its innovations' whiteness when ``tested`` (else ``None``)."""
+        stage = {"force_error_N": force_error, "nis_per_dof": _nis_per_dof(acc), "iterations": it, "fit": phase}
         stages.append(stage)
-        return w_fit, nis, white
+        if not tested:
+            return None
+        test = innovation_whiteness(acc.innov)
+        stage["ljung_box_q"], stage["white"] = test["q"], test["white"]
+        return test["white"]
 
     # continuation: the intermediate stages, cheaply (window, few passes); with ``whiteness`` the descent
     # also stops where the innovations, white at a larger process noise, turn correlated (a process noise
@@ -423,10 +427,7 @@ def refine(
     if whiteness and seen_white and j == n_st - 1:  # the last stage's innovations, on the window, too
         observer.set_force_error(force_errors[j] * load)
         acc_last, _ = _pass(observer, sub, w, sub_from, gate, innovations=True)
-        test = innovation_whiteness(acc_last.innov)
-        stages.append({"force_error_N": force_errors[j] * load, "nis_per_dof": _nis_per_dof(acc_last), "iterations": 0,
-                       "fit": "continuation (test only)", "ljung_box_q": test["q"], "white": test["white"]})  # fmt: skip
-        if not test["white"]:
+        if not record(force_errors[j] * load, acc_last, 0, "continuation (test only)", True):
             j -= 1
             w = cheap_w[j]
     # the stage reached, on the whole log; its neighbours too when the whole log disagrees
@@ -452,6 +453,14 @@ def refine(
     fit.force_error = fe
     fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe}
     return fit
+
+
+def hold_fit(observer: NeuroAdaptiveObserver, fit: OfflineFit) -> None:
+    """Leave ``observer`` holding ``fit``: its process noise, weights and weight covariance (after a
+    refit under another assumption, or when choosing between fits)."""
+    observer.set_force_error(fit.force_error)
+    observer.reset(weights=fit.weights)
+    observer._state.pw[:] = fit.covariance
 
 
 def _final_fit(observer, sensors, w, Lam, fit_from, gate, costs, iterations) -> OfflineFit:

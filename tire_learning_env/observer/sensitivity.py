@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from .neuro_adaptive import NeuroAdaptiveObserver
-from .offline import OfflineFit, _continuation_rows, _gauss_newton
+from .offline import OfflineFit, _continuation_rows, _gauss_newton, hold_fit
 
 __all__ = ["steering_hold_sensitivity", "yaw_dynamics_check"]
 
@@ -29,7 +29,8 @@ def _window_baseline(observer: NeuroAdaptiveObserver, sensors: dict, fit: Offlin
                      max_iter: int, tol: float, min_decrease: float) -> tuple[dict, float, np.ndarray, float]:  # fmt: skip
     """The log's most active ``window_s`` (the whole log if shorter) and the fit refitted on it under the
     observer's own assumptions: the baseline every alternative is compared with (computed once per fit)."""
-    key = (float(window_s), observer.steering_hold, float(observer.vehicle.Iz), float(gate), int(max_iter))
+    key = (float(window_s), observer.steering_hold, float(observer.vehicle.Iz), float(gate), int(max_iter), float(tol),
+           float(min_decrease))  # fmt: skip
     cached = getattr(fit, "_window_baselines", None)
     if cached is None:
         cached = fit._window_baselines = {}
@@ -78,8 +79,7 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
     lo, hi = observer._weight_box()
     w0 = np.zeros_like(fit.weights)
     # a long log: its most active window, both holds refitted
-    rows, fit_from, w_same, c_last = _window_baseline(observer, sensors, fit, window_s, gate, max_iter, tol, min_decrease)
-    c_same = [c_last]
+    rows, fit_from, w_same, c_same = _window_baseline(observer, sensors, fit, window_s, gate, max_iter, tol, min_decrease)
     t_w = np.asarray(rows["t"], dtype=float)
     try:
         observer.steering_hold = other
@@ -87,10 +87,9 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
                                             max_iter, tol, min_decrease)  # fmt: skip
     finally:
         observer.steering_hold = used
-        observer.reset(weights=fit.weights)
-        observer._state.pw[:] = fit.covariance
+        hold_fit(observer, fit)
     w_alt = fit.weights + (w_alt - w_same)
-    decrease = float(c_same[-1] - c_alt[-1])  # > 0: the other hold fits the window better (chi-square units)
+    decrease = float(c_same - c_alt[-1])  # > 0: the other hold fits the window better (chi-square units)
     info = {"other": other, "iterations": it, "window_s": [float(t_w[0]), float(t_w[-1])],
             "cost_decrease_under_other_chi2": decrease}  # fmt: skip
     if decide_by_cost and abs(decrease) > decisive_chi2:
@@ -113,12 +112,12 @@ def yaw_dynamics_check(observer: NeuroAdaptiveObserver, sensors: dict, fit: Offl
     The weights are refitted (at most ``max_iter`` Gauss-Newton steps from the fit, on the
     log's most active ``window_s`` seconds) with the yaw inertia scaled by ``factor`` and by
     ``1 / factor``. Where the model is right the prediction-error cost is lowest at the
-    file's inertia (measured on low-order Pacejka logs: both sides cost 10-40 more); a
-    decrease above ``decisive_chi2`` (chi-square units, one parameter) on either side rejects
-    the file's yaw dynamics: the inertia is off, or the vehicle has dynamics a bicycle lacks
-    (on CommonRoad multi-body logs, roll and suspension compliance: a 15 % lower inertia
-    fitted 60-75 better, while the stiffness read 5-8 % under the effective stiffness with a
-    band of 0.4-0.6 %).
+    file's inertia (measured on low-order Pacejka lane-change and curve logs: both sides cost
+    30-190 more); a decrease above ``decisive_chi2`` (chi-square units, one parameter) on either
+    side rejects the file's yaw dynamics: the inertia is off, or the vehicle has dynamics a
+    bicycle lacks (on one CommonRoad multi-body log, at the process noise the NIS alone chose, a
+    13-20 % lower inertia fitted 58-75 better while the stiffness read -5.6 / -8.2 % against the
+    effective stiffness with a band of 0.6 / 0.4 %).
 
     Then the stiffness is only as sure as its dependence on the yaw dynamics. The weights are
     refitted once more at the inertia the cost prefers (the parabola through the three costs
@@ -167,8 +166,7 @@ def yaw_dynamics_check(observer: NeuroAdaptiveObserver, sensors: dict, fit: Offl
                 refit(float(np.exp(x)), 3 * max_iter)  # the answer the band reaches for: converged
     finally:
         observer.set_vehicle(vehicle)
-        observer.reset(weights=fit.weights)
-        observer._state.pw[:] = fit.covariance
+        hold_fit(observer, fit)
     fit.dynamics_alternatives = changes if rejected else []
     info = {
         "verdict": "rejected" if rejected else "consistent",
