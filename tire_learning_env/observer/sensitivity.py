@@ -115,9 +115,8 @@ def yaw_dynamics_check(observer: NeuroAdaptiveObserver, sensors: dict, fit: Offl
     file's inertia (measured on low-order Pacejka lane-change and curve logs: both sides cost
     30-190 more); a decrease above ``decisive_chi2`` (chi-square units, one parameter) on either
     side rejects the file's yaw dynamics: the inertia is off, or the vehicle has dynamics a
-    bicycle lacks (on one CommonRoad multi-body log, at the process noise the NIS alone chose, a
-    13-20 % lower inertia fitted 58-75 better while the stiffness read -5.6 / -8.2 % against the
-    effective stiffness with a band of 0.6 / 0.4 %).
+    bicycle lacks (on a CommonRoad multi-body log the cost falls toward a lower inertia, by 7 at
+    x0.8 at the reported process noise: ``benchmarks/bench_multi_body_diagnosis.py``).
 
     Then the stiffness is only as sure as its dependence on the yaw dynamics. The weights are
     refitted once more at the inertia the cost prefers (the parabola through the three costs
