@@ -10,9 +10,14 @@ import numpy as np
 
 from ..params import CameraParams, ParameterError, _Params
 from .gains import GainDesign
-from .neuro_adaptive import AdaptationParams
+from .settings import AdaptationParams, HealthParams
 
 __all__ = ["ObserverConfig"]
+
+#: The fields :meth:`ObserverConfig.adaptation` hands to :class:`AdaptationParams` as they are;
+#: their defaults are its defaults (a dataclass' class attribute), as are the gain design's and the health test's.
+ADAPTATION_FIELDS = ("initial_std", "random_walk", "max_std", "prior_length", "prior_symmetry", "online_prior_length",
+                     "block_s", "sensor_offsets")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -91,20 +96,20 @@ class ObserverConfig(_Params):
     stiffness_known: bool = False
     linear_region_deg: float = 0.5
     offline: bool = True
-    decay_rate: float = 0.5
-    imu_decay_rate: float = 0.1
-    camera_force_error: float = 0.013
-    imu_force_error: float = 0.1
-    initial_std: float = 0.5
-    random_walk: float = 0.0
-    max_std: float = 1.0
-    prior_length: float = 1.0
-    prior_symmetry: float = 0.8
-    online_prior_length: float | None = None
-    causal_update: str | None = None
-    block_s: float = 2.0
-    sensor_offsets: bool = True
-    nis_factor: float = 3.0
+    decay_rate: float = GainDesign.camera_decay_rate
+    imu_decay_rate: float = GainDesign.imu_decay_rate
+    camera_force_error: float = GainDesign.camera_force_error
+    imu_force_error: float = GainDesign.imu_force_error
+    initial_std: float = AdaptationParams.initial_std
+    random_walk: float = AdaptationParams.random_walk
+    max_std: float = AdaptationParams.max_std
+    prior_length: float = AdaptationParams.prior_length
+    prior_symmetry: float = AdaptationParams.prior_symmetry
+    online_prior_length: float | None = AdaptationParams.online_prior_length
+    causal_update: str | None = None  # None: by the sensors (above), not AdaptationParams' default
+    block_s: float = AdaptationParams.block_s
+    sensor_offsets: bool = AdaptationParams.sensor_offsets
+    nis_factor: float = HealthParams.nis_factor
     identifiable_rel_2sigma: float = 0.1
     curve_rel_2sigma: float = 0.1
 
@@ -139,11 +144,9 @@ class ObserverConfig(_Params):
         return cls(**kw)
 
     def adaptation(self) -> AdaptationParams:
-        return AdaptationParams(
-            initial_std=self.initial_std, random_walk=self.random_walk, max_std=self.max_std,
-            prior_length=self.prior_length, prior_symmetry=self.prior_symmetry, sensor_offsets=self.sensor_offsets,
-            online_prior_length=self.online_prior_length, causal_update=self.causal_update or "block", block_s=self.block_s,
-        )  # fmt: skip
+        """The weight prior and learning law (:data:`ADAPTATION_FIELDS`; ``causal_update`` None: the block law)."""
+        return AdaptationParams(**{name: getattr(self, name) for name in ADAPTATION_FIELDS},
+                                causal_update=self.causal_update or AdaptationParams.causal_update)  # fmt: skip
 
     def gain_design(self) -> GainDesign:
         return GainDesign(camera_decay_rate=self.decay_rate, imu_decay_rate=self.imu_decay_rate,
