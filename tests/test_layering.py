@@ -13,6 +13,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "tire_learning_env"
 #: The layers, lowest first: a module may import from its own layer and the layers before it.
 #: Keep in step with the "Data flow" section of DEVELOPING.md.
 LAYERS = (
+    ("_jit_cache",),  # numba's cache keyed on a family of files (stdlib only), for any compiled module
     ("params",),
     ("metrics",),  # scoring functions: pure numpy, used by wrappers and the analysis alike
     ("_kernels",),

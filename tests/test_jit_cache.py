@@ -1,0 +1,152 @@
+"""numba's on-disk cache of the compiled estimator follows edits to any file of its family.
+
+numba keys a cached function on its own file only, so an edit to a compiled callee in another
+file would leave the caller's cached machine code in use (:mod:`tire_learning_env._jit_cache`).
+The end-to-end test edits a copy of the package: a callee in ``_kernel_predict.py`` (the slip
+angles) that the measurement of the correction in ``_kernel_update.py`` calls, and
+checks that a fresh process runs the edited callee. Its control runs the same steps with
+``key_on_family`` made a no-op and shows the hazard: the process after the edit loads the
+stale caller from the cache and prints the first result again (numba 0.68).
+"""
+
+import ast
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tire_learning_env._jit_cache import STAMP_TAG, _digest, family_digest, key_on_family
+from tire_learning_env.observer import _kernel, _kernel_predict, _kernel_types, _kernel_update
+
+PACKAGE = Path(__file__).resolve().parents[1] / "tire_learning_env"
+FAMILY_MODULES = (_kernel_types, _kernel_predict, _kernel_update, _kernel)
+
+# The IMU measurement of the correction (``_kernel_update``), which calls the forces and slip
+# angles (``_kernel_predict``), on an observer's own arguments: a cheap cross-file compile.
+PROBE = """
+import json
+from types import SimpleNamespace
+
+import numpy as np
+from tire_learning_env.observer import _kernel as K
+from tire_learning_env.observer._kernel_update import _measurement
+from tire_learning_env.observer.basis import imu_basis
+from tire_learning_env.observer.certificate import ObserverGains
+from tire_learning_env.observer.model import measurement_model
+from tire_learning_env.params import VehicleParams
+from tire_learning_env.observer.neuro_adaptive import NeuroAdaptiveObserver
+
+vehicle = VehicleParams()
+gains = ObserverGains(measurement_model("imu"), np.array([0.0, 100.0]), np.zeros((1, 2, 2)), np.zeros((1, 2, 2)),
+                      np.zeros((2, 2)), [SimpleNamespace(decay_rate=1.0, period=0.01, certified=True)])
+obs = NeuroAdaptiveObserver(vehicle, imu_basis(vehicle), gains, [0.01, 0.01, 0.1, 0.01]).reset()
+wk = K.make_work(2, obs.n_weights, obs._bounds[0].shape[1])
+z = np.array([np.nan, np.nan, 2.0, 0.05])
+nu = _measurement(K.GROUP_IMU, obs._state, 0.02, 20.0, obs._model_tuple, obs._settings(K.MODE_CAUSAL, 0.0), z, wk)
+print(json.dumps([float(nu[0]), float(nu[1])]))
+"""
+
+
+def _probe(root: Path) -> list[float]:
+    env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS="1")
+    env.pop("NUMBA_CACHE_DIR", None)  # the copy's own __pycache__ (numba's default in a writable tree)
+    env.pop("NUMBA_DISABLE_JIT", None)
+    done = subprocess.run([sys.executable, "-c", PROBE], env=env, cwd=root, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert text.count(old) == 1, f"{old!r} not found once in {path.name}"
+    path.write_text(text.replace(old, new))
+
+
+SLIP = "return delta - (vy + lf * r) / v, -(vy - lr * r) / v"
+SLIP_EDITED = "return 2.0 * (delta - (vy + lf * r) / v), -(vy - lr * r) / v"  # the front slip doubled
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("guard", [True, False], ids=["family stamp", "numba alone (the hazard)"])
+def test_an_edited_callee_in_another_file_is_recompiled(tmp_path, guard):
+    root = tmp_path / "copy"
+    shutil.copytree(PACKAGE, root / "tire_learning_env", ignore=shutil.ignore_patterns("__pycache__"))
+    if not guard:  # the control: numba's own stamp only
+        _edit(root / "tire_learning_env" / "_jit_cache.py", "    digest = family_digest(files)\n",
+              "    return 0\n    digest = family_digest(files)\n")
+    callee = root / "tire_learning_env" / "observer" / "_kernel_predict.py"
+    first = _probe(root)
+    assert list((root / "tire_learning_env" / "observer" / "__pycache__").glob("_kernel_update._measurement-*.nbi")), \
+        "the measurement was not cached: the test would not exercise the cache"
+    assert _probe(root) == first  # same source: loaded from the cache, same result
+    _edit(callee, SLIP, SLIP_EDITED)
+    edited = _probe(root)
+    if not guard:
+        assert edited == first, "numba now follows edits across files by itself: the family stamp may be dropped"
+        return
+    assert edited != first, "the edited callee did not reach the cached caller (stale machine code ran)"
+    _edit(callee, SLIP_EDITED, SLIP)  # the edit is what ran: undoing it gives the first result back
+    assert _probe(root) == first
+
+
+def test_every_compiled_function_of_the_family_is_stamped_with_its_digest():
+    digest = family_digest(_kernel_types.KERNEL_FAMILY)
+    assert digest is not None and len(digest) == 64
+    stamped = 0
+    for module in FAMILY_MODULES:
+        for obj in vars(module).values():
+            if getattr(obj, "py_func", None) is not None and obj.py_func.__module__ == module.__name__:
+                stamp = obj._cache._cache_file._source_stamp
+                assert stamp[:2] == (STAMP_TAG, digest), f"{module.__name__}.{obj.py_func.__name__} is not stamped"
+                stamped += 1
+    assert stamped >= 25  # the family's compiled functions (numba internals changed if none is found)
+
+
+def test_the_family_lists_every_observer_module_that_holds_compiled_functions():
+    """A module that defines compiled functions and imports from the family belongs to it
+    (else its cache would not follow the family's edits)."""
+    family = {path.name for path in _kernel_types.KERNEL_FAMILY}
+    assert all((PACKAGE / "observer" / name).exists() for name in family)
+    for path in sorted((PACKAGE / "observer").glob("*.py")):
+        tree = ast.parse(path.read_text())
+        jitted = any(isinstance(node, ast.Name) and node.id == "njit" for node in ast.walk(tree))
+        uses_family = any(isinstance(node, ast.ImportFrom) and (node.module or "").startswith("_kernel")
+                          for node in ast.walk(tree))  # fmt: skip
+        if jitted and uses_family:
+            assert path.name in family, f"{path.name} calls the compiled family: add it to KERNEL_FAMILY"
+
+
+def test_the_digest_follows_every_file_and_a_restamp_keeps_numbas_own_stamp(tmp_path):
+    files = [tmp_path / "a.py", tmp_path / "b.py"]
+    for f, text in zip(files, ("x = 1\n", "y = 2\n")):
+        f.write_text(text)
+    before = family_digest(files)
+    files[1].write_text("y = 3\n")
+    _digest.cache_clear()  # the digest is computed once per process and list of paths
+    assert family_digest(files) != before
+    assert family_digest([tmp_path / "missing.py"]) is None
+    assert key_on_family({"__name__": "m"}, [tmp_path / "missing.py"]) == 0
+
+    class _File:
+        _source_stamp = (1.0, 10)
+
+    class _Cache:
+        _cache_file = _File()
+
+    def f():
+        pass
+
+    f.__module__ = "m"
+
+    class _Dispatcher:
+        py_func = f
+        _cache = _Cache()
+
+    namespace = {"__name__": "m", "f": _Dispatcher()}
+    assert key_on_family(namespace, files) == 1
+    assert key_on_family(namespace, files) == 1  # idempotent: numba's stamp kept, not nested
+    assert namespace["f"]._cache._cache_file._source_stamp == (STAMP_TAG, family_digest(files), (1.0, 10))
