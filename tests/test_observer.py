@@ -397,3 +397,24 @@ def test_multi_body_log_process_noise_chosen_by_whiteness():
     k, sd = np.array(res.cornering_stiffness()), np.array(res.cornering_stiffness_std())
     assert np.all(np.abs(k / np.array(k_true) - 1.0) < 0.05), k / np.array(k_true) - 1.0
     assert np.all(np.abs(k - np.array(k_true)) <= 2.0 * sd)
+
+
+def test_stiffness_readout_keeps_the_range_of_a_drive_that_turned_one_way():
+    """A drive whose slip is one-sided (every curve the same way) has a range end next to zero. The
+    secant-drop test must not judge the curve there, where the force is mostly the curve's offset:
+    on the Study 1 truth log that end (-1.4e-6 rad) cut the read-out's range from 0.96 deg to the
+    0.25 deg minimum and its stiffness to an ill-conditioned extrapolation."""
+    import math
+
+    from tire_learning_env.observer.readout import stiffness_readout
+
+    obs = build_observer(V, CameraParams(rate=20.0), ObserverConfig(), physics_dt=0.01)
+    n = obs.basis.n_per_axle
+    w = np.zeros(obs.n_weights)
+    w[n - 1] = 30.0 / (obs.basis.scale[0] * obs.basis.activations(np.zeros(1), 0)[0, n - 1])  # a 30 N offset
+    assert abs(obs.axle_force(np.zeros(1), 0, weights=w)[0] - 30.0) < 1e-6
+    slip = np.r_[np.full(30, -1.4e-6), np.linspace(0.0, math.radians(1.0), 2000)]  # 1.5 % of the rows just below 0
+    g, info = stiffness_readout(obs, w, slip, 0)
+    assert info["range_deg"][1] > 0.95, info  # the whole range the drive covered, not the 0.25 deg minimum
+    # a straight line with an offset: its slope is the nominal stiffness, whatever the offset
+    assert abs((V.Cf + g @ w) / V.Cf - 1.0) < 1e-3

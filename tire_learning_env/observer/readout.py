@@ -66,7 +66,9 @@ def stiffness_readout(observer: NeuroAdaptiveObserver, w: NDArray, slip: NDArray
         G = curve_gradient(observer, grid, axle)
         g_axle = Pinv[1] @ G  # slope at zero = 2C + g_axle^T w
         k = c2 + float(g_axle @ w)
-        ends = [e for e in (r_lo, r_hi) if abs(e) > 1e-6]
+        # a range end next to zero (a drive that turned one way) says nothing of the curve's drop, and the
+        # force there is mostly the curve's offset: only ends beyond a quarter of the range are tested
+        ends = [e for e in (r_lo, r_hi) if abs(e) > max(1e-6, 0.25 * max(abs(r_lo), abs(r_hi)))]
         F = observer.axle_force(np.array(ends), axle, weights=w) if ends else np.zeros(0)
         drop = max([1.0 - f / (k * e) for f, e in zip(F, ends)], default=0.0)
         if drop <= max_drop or cap <= math.radians(min_deg):
