@@ -409,6 +409,7 @@ class NeuroAdaptiveObserver:
         if b["t_end"] is None:
             b["t_end"] = fit_from + self.adaptation.block_s
         pieces: list[EstimateTrace] = []
+        held: list[NDArray] = []  # the weights each piece held (a piece's rows all carry them)
         k = 0
         while k < n:
             while t[k] >= b["t_end"]:
@@ -416,8 +417,9 @@ class NeuroAdaptiveObserver:
             j = max(int(np.searchsorted(t, b["t_end"], side="left")), k + 1)
             last = j >= n
             piece = _KernelRows({c: v[k:j] for c, v in rows.items()})  # validated once, above
+            held.append(self._state.w.copy())
             tr = self.run(piece, predict_last=predict_last if last else False, mode="fixed", accumulator=b["acc"],
-                          accumulate_from=fit_from, gate=25.0, compute_std=compute_std, store_weights=store_weights,
+                          accumulate_from=fit_from, gate=25.0, compute_std=compute_std, store_weights=False,
                           kalman=True)  # fmt: skip
             if np.any(np.isin(tr.health, (K.HEALTH_NO_DATA, K.HEALTH_INCONSISTENT, K.HEALTH_DIVERGED))):
                 b["healthy"] = False  # adaptation frozen while the health flag is tripped
@@ -430,15 +432,21 @@ class NeuroAdaptiveObserver:
                              float(self._state.hs[K.HS_KAPPA_RATE]), ramp)  # fmt: skip
                 self.t = float(t[j])
             k = j
-        if len(pieces) == 1:
-            return pieces[0]
         if not pieces:
             return self.run(sensors, predict_last, mode="fixed", compute_std=compute_std, store_weights=store_weights)
+        # the per-row weights from the weights each piece held, written once (the pieces do not store them:
+        # on a 30 min, 100 Hz log that was 55 MB per copy, and concatenating held two)
+        lengths = [len(p.t) for p in pieces]
+        weights = np.repeat(np.vstack(held), lengths, axis=0) if store_weights else np.empty((0, self.n_weights))
+        if len(pieces) == 1:
+            pieces[0].weights = weights
+            return pieces[0]
         first = pieces[0]
         arrays = {f: np.concatenate([getattr(p, f) for p in pieces]) for f in
-                  ("t", "state", "slip", "force", "force_nonlinear", "weights", "std", "health", "innovation", "nis",
+                  ("t", "state", "slip", "force", "force_nonlinear", "std", "health", "innovation", "nis",
                    "vx", "kappa")}  # fmt: skip
-        return EstimateTrace(**arrays, state_names=first.state_names, meta=dict(first.meta))
+        del pieces
+        return EstimateTrace(**arrays, weights=weights, state_names=first.state_names, meta=dict(first.meta))
 
     def predict(self, dt: float | None = None, delta: float = 0.0, vx: float | None = None, kappa: float = 0.0,
                 ax: float = 0.0, kappa_rate: float = 0.0, steering_rate: float = 0.0) -> "NeuroAdaptiveObserver":  # fmt: skip
