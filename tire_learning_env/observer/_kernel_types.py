@@ -167,6 +167,8 @@ class _Work(NamedTuple):
 
 
 def make_work(nx: int, nw: int, nb: int = 64) -> _Work:
+    """Scratch arrays of the kernels for ``nx`` states, ``nw`` weights and ``nb`` distinct activation
+    bounds per axle (contents undefined; every kernel writes before it reads)."""
     e = np.empty
     return _Work(e(nw), e(nw), e(nx), e(nx), e(nx), e(nx), e(nx), e((nx, nx)), e((nx, nx)), e((nx, nx)),
                  e((nx, nx)), e((nx, nw)), e((2, nx)), e((2, nw)), e((2, nw)), e((2, nw)), e((nw, 2)), e(nw), e((nx, 2)),
