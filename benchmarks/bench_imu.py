@@ -6,6 +6,8 @@
   unless ``gains_cold_solve_s`` says otherwise.
 - ``linear_kf_s``: the linear Kalman filter (``baselines.LinearKalmanFilter``) on the same rows.
 - ``blend_s``: the IMM mode probabilities of the two and their mixture (``imu.blend``).
+- ``observer_other_causal_law_s``: the causal pass again under the other learning law (the causal
+  blend's third mode, ``imu.BlendParams.other_causal_law``).
 - ``estimate_command_s``: the whole ``tire-learning estimate`` IMU branch
   (:func:`tire_learning_env.imu.estimate_imu_log`: cleaning, estimation, scores, figures, files).
 - ``sideslip_rmse_deg``: whole log and halves, against the reference sensor, for the
@@ -46,6 +48,8 @@ def _scores(res, beta_ref, t) -> dict:
         "reported_blend": res.blend.beta, "online_blend_causal": res.blend_online.beta,
         "observer_online_causal": res.online.beta, "observer_refined": res.trace.beta, "linear_kf": res.kalman.beta,
     }  # fmt: skip
+    if res.online_other_law is not None:  # a mode of the causal blend: the causal pass under the other learning law
+        traces["observer_online_other_law"] = res.online_other_law.beta
     return {k: {h: round(v, 4) for h, v in sideslip_rmse_deg(b, beta_ref, masks).items()} for k, b in traces.items()}
 
 
@@ -100,6 +104,8 @@ def main() -> None:
             "observer_gains_s": round(rt["gains"], 3),
             "observer_online_pass_s": round(rt["online_pass"], 4),
             "observer_offline_refinement_s": round(rt.get("offline_refinement", 0.0), 4),
+            "observer_other_causal_law_s": round(res.runtime_s.get("observer_other_causal_law", 0.0), 4),
+            "causal_blend_mean_probability_by_mode": res.blend_online.summary()["mean_probability_by_mode"],
             "estimate_imu_cold_cache_s": round(cold, 3),
             "linear_kf_s": round(res.runtime_s["linear_kf"], 5),
             "blend_s": round(res.runtime_s["blend"], 5),

@@ -23,7 +23,7 @@ from tire_learning_env.imu import (
 )
 from tire_learning_env.io import LogFormatError, read_log, write_log
 from tire_learning_env.observer import EstimateTrace, ObserverConfig, build_observer
-from tire_learning_env.params import TireParams, VehicleParams
+from tire_learning_env.params import ParameterError, TireParams, VehicleParams
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 REVS_LOG = DATA / "revs_250lm_part1.csv"
@@ -141,6 +141,29 @@ def test_blend_of_two_traces_lies_between_them(drive):
     assert _rmse_deg(bad.beta, ref) > 2 * _rmse_deg(good.beta, ref)  # the wrong tires are clearly worse
     assert bl.summary()["fraction_kf_above_0.9"] > 0.8  # ... and lose (mode 1 is the second trace)
     assert _rmse_deg(bl.beta, ref) < 1.2 * _rmse_deg(good.beta, ref)
+
+
+def test_blend_weighs_further_observer_modes(drive):
+    """The causal blend's third mode (the observer under the other causal law): the mode that predicts
+    the IMU best takes the weight, wherever it sits in the list, and the mixture stays convex."""
+    sensors, truth, _ = drive
+    rows = {k: sensors[k] for k in ("t", "delta", "vx", "ay", "yaw_rate")}
+    good = LinearKalmanFilter(V, noise_std=(0.5, 0.003)).run(rows)
+    bad = LinearKalmanFilter(V, axle_stiffness=(0.5 * V.Cf, 4.0 * V.Cr), noise_std=(0.5, 0.003)).run(rows)
+    worse = LinearKalmanFilter(V, axle_stiffness=(3.0 * V.Cf, 0.4 * V.Cr), noise_std=(0.5, 0.003)).run(rows)
+    bl = blend_traces(bad, worse, alternatives=[("observer_good", good)])
+    assert bl.modes == ("observer", "observer_good", "linear_kf") and bl.mu.shape == (len(rows["t"]), 3)
+    assert np.allclose(bl.mu.sum(axis=1), 1.0) and np.allclose(bl.mu[0], [0.25, 0.25, 0.5])  # observer modes share
+    stack = np.stack([bad.beta, good.beta, worse.beta])
+    assert np.all(bl.beta >= stack.min(axis=0) - 1e-12) and np.all(bl.beta <= stack.max(axis=0) + 1e-12)
+    assert bl.summary()["mean_probability_by_mode"]["observer_good"] > 0.8
+    m = rows["t"] >= 2.0  # past the warm-up, where the modes sit at their priors (the KF's 0.5 on the worst one)
+    ref = truth["true_beta"][m]
+    err = {k: _rmse_deg(tr.beta[m], ref) for k, tr in (("blend", bl), ("good", good), ("bad", bad), ("worse", worse))}
+    assert err["blend"] < 1.2 * err["good"] < 0.6 * min(err["bad"], err["worse"]), err
+    np.testing.assert_allclose(bl.mu_observer, 1.0 - bl.mu[:, 2])
+    with pytest.raises(ParameterError, match="mode names"):
+        blend_traces(bad, worse, alternatives=[("linear_kf", good)])
 
 
 # ---- a noisy accelerometer: never worse than the linear KF -------------------------------------

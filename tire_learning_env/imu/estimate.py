@@ -58,6 +58,8 @@ ESTIMATE_COLUMNS = ("t", "beta_hat", "vy_hat", "yaw_rate_hat", "alpha_f_hat", "a
 #: time span of the local polynomial fits that measure the IMU noise [s] (the core's)
 NOISE_WINDOW_S = IMU_NOISE_WINDOW_S
 AXLES = ("front", "rear")
+#: the causal learning law the causal blend weighs beside the core's (``AdaptationParams.causal_update``)
+OTHER_LAW = {"rls": "block", "block": "rls"}
 _COLUMNS = ("t", "delta", "vx", "ax", "ay", "yaw_rate")
 
 
@@ -119,11 +121,17 @@ class ImuEstimate:
     blend : Blend
         Mixture of the refined observer pass and the KF: the reported states.
     blend_online : Blend
-        Mixture of the causal observer pass and the KF (what a car gets on line).
+        Mixture of the causal observer pass, the causal pass under the other learning law
+        (:attr:`online_other_law`, with ``BlendParams.other_causal_law``) and the KF: what a car
+        gets on line.
     noise : dict
         How the IMU noise was obtained.
     runtime_s : dict
         Wall times [s].
+    blend_params : BlendParams
+    online_other_law : EstimateTrace or None
+        The observer's causal pass under the other causal learning law (``"block"`` when the core
+        ran ``"rls"``, the IMU default, and the other way round).
     """
 
     core: EstimationResult
@@ -134,6 +142,7 @@ class ImuEstimate:
     noise: dict
     runtime_s: dict
     blend_params: BlendParams = BlendParams()
+    online_other_law: EstimateTrace | None = None
 
     @property
     def online(self) -> EstimateTrace:
@@ -213,19 +222,27 @@ def estimate_imu(
     noise_used = (max(noise[0], 0.01), max(noise[1], 1e-4))  # the core's floors
     core = estimate(rows, vehicle, config=config, cache=cache)
     runtime["observer"] = core.runtime_s
+    params = blend or BlendParams()
+    other = None
+    if params.other_causal_law:  # the causal pass again under the other learning law (a mode of the causal blend)
+        t0 = time.perf_counter()
+        law = core.observer.adaptation.causal_update
+        alt = estimate(rows, vehicle, config=config.replace(causal_update=OTHER_LAW[law], offline=False), cache=cache)
+        other = (f"observer_{OTHER_LAW[law]}", alt.online)
+        runtime["observer_other_causal_law"] = time.perf_counter() - t0
     dt = float(np.median(np.diff(rows["t"])))
     t0 = time.perf_counter()
     kf = LinearKalmanFilter(vehicle, noise_std=noise_used, physics_dt=dt)
     ktrace = kf.run(rows)
     runtime["linear_kf"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    params = blend or BlendParams()
     # the refined pass used the whole log: its mode probabilities may too (smoothed); the causal one stays causal
     b_final = blend_traces(core.trace, ktrace, params, smooth=config.offline)
-    b_online = blend_traces(core.online, ktrace, params)
+    b_online = blend_traces(core.online, ktrace, params, alternatives=(other,) if other else ())
     runtime["blend"] = time.perf_counter() - t0
     runtime["total"] = time.perf_counter() - t_all
-    return ImuEstimate(core, ktrace, kf, b_final, b_online, noise_info, runtime, params)
+    return ImuEstimate(core, ktrace, kf, b_final, b_online, noise_info, runtime, params,
+                       online_other_law=other[1] if other else None)  # fmt: skip
 
 
 # -- the estimate command on an IMU log -------------------------------------------------------------
@@ -264,7 +281,8 @@ def estimate_imu_log(
       ``beta_std`` (its std [rad]), ``mu_observer`` (probability of the observer mode),
       ``beta_hat_online`` (causal blend), ``beta_observer``, ``beta_observer_online`` (the
       observer alone, refined and causal), ``beta_kf`` (the linear KF), ``health`` (of the
-      causal observer, :data:`~tire_learning_env.observer.HEALTH_NAMES` index);
+      causal observer, :data:`~tire_learning_env.observer.HEALTH_NAMES` index),
+      ``beta_observer_online_other_law`` (the causal pass under the other learning law, when run);
     - ``tire_curves.csv`` (learned, its two-sigma band, online, nominal, measured),
       ``tire_curves.png``, ``tire_curve_front.png``, ``tire_curve_rear.png``, ``sideslip.png``,
       ``weights.png``;
@@ -417,6 +435,8 @@ def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: Obser
             "beta_hat_online": "blend of the causal observer pass and the linear KF",
             "beta_observer": "refined observer pass alone", "beta_observer_online": "causal observer pass alone",
             "beta_kf": "linear KF alone",
+            "beta_observer_online_other_law": "causal observer pass under the other causal learning law (a mode of "
+            "the causal blend)",
         },  # fmt: skip
         "not_modelled": [
             "longitudinal load transfer (a_x): the axle curves are learned as functions of slip only",
@@ -439,6 +459,8 @@ def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: Obser
         "reported_blend": sideslip_rmse_deg(result.blend.beta, beta_ref, masks),
         "online_blend_causal": sideslip_rmse_deg(result.blend_online.beta, beta_ref, masks),
         "observer_online_causal": sideslip_rmse_deg(core.online.beta, beta_ref, masks),
+        **({"observer_online_other_law": sideslip_rmse_deg(result.online_other_law.beta, beta_ref, masks)}
+           if result.online_other_law is not None else {}),
         "observer_refined": sideslip_rmse_deg(core.trace.beta, beta_ref, masks),
         "linear_kf_baseline": sideslip_rmse_deg(result.kalman.beta, beta_ref, masks),
     }
@@ -491,6 +513,8 @@ def _write_outputs(out, cleaned: DrivingLog, vehicle, result: ImuEstimate, metri
             "mu_observer": b.mu_observer, "beta_hat_online": result.blend_online.beta, "beta_observer": fin.beta,
             "beta_observer_online": onl.beta, "beta_kf": result.kalman.beta, "health": onl.health.astype(float),
         }  # fmt: skip
+        if result.online_other_law is not None:
+            cols["beta_observer_online_other_law"] = result.online_other_law.beta
         write_table(d / "estimates.csv", cols)
         grid = np.radians(np.linspace(-10.0, 10.0, 201))
         table = {"alpha": grid}
