@@ -309,24 +309,35 @@ def test_path_curvature_ramps_between_rows_at_100_hz():
     assert np.all(np.abs(k / np.array([v.Cf, v.Cr]) - 1.0) < 0.008), k / np.array([v.Cf, v.Cr]) - 1.0
 
 
-@pytest.mark.parametrize(("rate", "max_err", "verdict"), [(100.0, 0.01, "identified"), (20.0, 0.03, "not_identifiable")])
-def test_sparse_rows_steering_ramps_and_the_band_carries_the_hold(rate, max_err, verdict):
-    """A 1 kHz closed-loop drive logged at 100 Hz rows or at the 20 Hz camera's frames only. Held
-    over each row (the estimator before), the steering read the stiffness +1.8 / +2.6 % (100 Hz, band
-    +/-0.35 / 0.45 %) and +11 / +18 % (20 Hz, band +/-0.6 / 0.8 %, "identified"); ramped, +0.15 / +0.14 %
-    and +1.2 / +1.8 %. What the steering did between rows is not in the log, so the band carries the
-    other hold's answer: the 20 Hz log is not identifiable, the 100 Hz one is, and both bands hold the truth."""
-    log = simulate("lane_changes", 120.0, camera=CameraParams.paper_noise(rate=20.0), seed=1)
+@pytest.mark.parametrize(("source", "max_err", "verdict"), [("held_100Hz", 0.015, "identified"),
+                                                            ("decimated_100Hz", 0.015, "identified"),
+                                                            ("frames_20Hz", 0.03, "not_identifiable")])  # fmt: skip
+def test_sparse_rows_the_answer_lies_between_the_holds_and_the_band_reaches_both(source, max_err, verdict):
+    """What the steering did between rows is not in the log, and the log cannot tell (in both 100 Hz
+    logs below the steering change at a frame's row is the reaction to that frame, R^2 0.47). A
+    simulator at 100 Hz holds it over its step: ramped, the stiffness read -1.75 / -2.17 % (band
+    +/-1.65 / 2.47 %, front not covered), held -0.14 / +0.20 %. A 1 kHz drive logged at 100 Hz is
+    closer to the ramp: ramped +0.11 / +0.54 %, held +1.87 / +3.09 %. So a camera log's answer is
+    the midpoint of the two holds' and its band reaches both. Rows that are a 20 Hz camera's frames
+    only come from a drive faster than its frames: the ramp is kept (+1.2 / +1.8 %; held +11 / +18 %,
+    the midpoint +5.4 / +8.6 %), and the band carries half the change: not identifiable, the
+    truth inside."""
+    if source == "held_100Hz":
+        log = simulate("lane_changes", 120.0, camera=CameraParams.paper_noise(rate=20.0), physics_rate=100.0, seed=1)
+        rows = log.sensors
+    else:
+        log = simulate("lane_changes", 120.0, camera=CameraParams.paper_noise(rate=20.0), seed=1)
+        s = {k: np.asarray(x) for k, x in log.sensors.items()}
+        idx = np.arange(0, len(s["t"]), 10) if source == "decimated_100Hz" else np.flatnonzero(np.isfinite(s["e1"]))
+        rows = {k: x[idx] for k, x in s.items()}
     v = log.vehicle
-    s = {k: np.asarray(x) for k, x in log.sensors.items()}
-    idx = np.arange(0, len(s["t"]), 10) if rate == 100.0 else np.flatnonzero(np.isfinite(s["e1"]))
-    rows = {k: x[idx] for k, x in s.items()}
     res = estimate(rows, v.replace(Cf=1.08 * v.Cf, Cr=0.94 * v.Cr), config=ObserverConfig(sensors="camera"))
-    assert res.calibration["steering_hold"]["used"] == "ramp"
+    hold = res.calibration["steering_hold"]
+    assert hold["used"] == "ramp" and ("reported" not in hold) == (source == "frames_20Hz"), hold
     truth = np.array([v.Cf, v.Cr])
     k, sd = np.array(res.cornering_stiffness()), np.array(res.cornering_stiffness_std())
     assert np.all(np.abs(k / truth - 1.0) < max_err), k / truth - 1.0
-    assert np.all(np.abs(k - truth) <= 2.0 * sd)
+    assert np.all(np.abs(k - truth) <= 2.0 * sd), (k / truth - 1.0, 2.0 * sd / truth)
     assert res.verdict == verdict
 
 

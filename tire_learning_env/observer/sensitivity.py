@@ -47,7 +47,8 @@ def _window_baseline(observer: NeuroAdaptiveObserver, sensors: dict, fit: Offlin
 def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, gate: float = 25.0,
                               max_iter: int = 2, tol: float = 1e-3, min_decrease: float = 1e-2,
                               min_row_period: float = 0.002, window_s: float = 300.0, decide_by_cost: bool = False,
-                              decisive_chi2: float = 10.0) -> dict:  # fmt: skip
+                              decisive_chi2: float = 10.0, midpoint: bool = False,
+                              alternative_iter: int | None = None) -> dict:  # fmt: skip
     """Refit under the other steering hold (``hold`` <-> ``ramp``) from the fit's weights and keep
     the weight change in ``fit.hold_alternatives`` (:meth:`OfflineFit.variance` adds it).
 
@@ -67,6 +68,19 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
     won (the caller refits under it). With a camera alone the cost does not decide: the
     curve and the latency absorb a wrong hold (a 100 Hz log's cost preferred the held
     steering by 20 while it read the stiffness +1.8 / +2.6 % off, the ramped +0.15 / +0.14 %).
+
+    With ``midpoint`` (a camera log whose rows lie between its frames, where nothing in the log
+    decides; :func:`.estimator.estimate` keeps the ramp when the rows are the frames themselves,
+    which come from a drive faster than its frames) the reported weights move
+    to the midpoint of the two holds' answers, and the band's term is half their difference:
+    the answer nearest to whichever the steering did, with a band that reaches both. Kept at
+    one end (the ramp), a 100 Hz log whose steering was held read -1.75 / -2.17 % with a band of
+    +/-1.65 / 2.47 % (front not covered), its held refit -0.14 / +0.20 %; a 1 kHz log decimated
+    to 100 Hz read +0.11 / +0.54 % ramped and +1.87 / +3.09 % held. The samples cannot tell the
+    two apart: in both, the steering change at a frame's row is the reaction to that frame
+    (R^2 0.47). At a 20 Hz camera's frames only, from the same 1 kHz drive, the holds differ by
+    10-16 % and the ramp is the near one (+1.2 / +1.8 %; the midpoint +5.4 / +8.6 %). ``alternative_iter`` Gauss-Newton steps (default ``2 * max_iter`` with
+    ``midpoint``, else ``max_iter``) carry the other hold's refit from the window's baseline.
     """
     t = np.asarray(sensors["t"], dtype=float)
     period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
@@ -83,8 +97,9 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
     t_w = np.asarray(rows["t"], dtype=float)
     try:
         observer.steering_hold = other
+        n_alt = int(alternative_iter) if alternative_iter is not None else (2 * max_iter if midpoint else max_iter)
         w_alt, _, c_alt, it = _gauss_newton(observer, rows, w_same, w0, fit.prior_precision, lo, hi, fit_from, gate,
-                                            max_iter, tol, min_decrease)  # fmt: skip
+                                            n_alt, tol, min_decrease)  # fmt: skip
     finally:
         observer.steering_hold = used
         hold_fit(observer, fit)
@@ -99,8 +114,14 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
         return info
     # the two holds bracket what the steering did (held, ramped, or in between): half the change
     # is the standard deviation, so the two-sigma band reaches the other hold's answer
-    fit.hold_alternatives = [0.5 * (w_alt - fit.weights)]
+    half = 0.5 * (w_alt - fit.weights)
+    fit.hold_alternatives = [half]
     info["sensitivity"] = "refitted under the other hold; the change is in the bands"
+    if midpoint:  # the answer midway between the holds; its band (two sigma >= the half change) reaches both
+        fit.weights = np.clip(fit.weights + half, lo, hi)
+        hold_fit(observer, fit)
+        info["reported"] = (f"midway between the answers under {used!r} and {other!r} (the log cannot tell which the "
+                            "steering did); the band reaches both")  # fmt: skip
     return info
 
 
