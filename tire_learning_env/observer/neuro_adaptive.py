@@ -323,7 +323,8 @@ class NeuroAdaptiveObserver:
         out = K.Outputs(
             np.empty((nr, nx)), np.empty((nr, 2)), np.empty((nr, 2)), np.empty((nr, 2)),
             np.empty((nr if store_weights else 0, nw)), np.empty((nr if compute_std else 0, nx)), np.empty((nr, 4)),
-            np.empty(nr), np.empty(nr, dtype=np.int8), np.zeros((nr if store_scores else 0, nw)),
+            # the scores in single precision: they only feed the sandwich variance (55 MB in double on 180k rows)
+            np.empty(nr), np.empty(nr, dtype=np.int8), np.zeros((nr if store_scores else 0, nw), dtype=np.float32),
         )  # fmt: skip
         if n:
             wk = K.make_work(nx, nw, self._bounds[0].shape[1])

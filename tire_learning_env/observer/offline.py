@@ -123,7 +123,9 @@ class OfflineFit:
         prior_part = np.maximum(model - data_part, 0.0)
         if self.scores is None or self.scores.shape[0] < 8:
             return model + self.prior_sensitivity(g)
-        u = self.scores @ Ainv_g  # (rows, n): each direction's score series
+        u = np.empty((self.scores.shape[0], Ainv_g.shape[1]))  # (rows, n): each direction's score series
+        for s in range(0, len(u), 32768):  # the single-precision scores converted a block at a time
+            u[s : s + 32768] = self.scores[s : s + 32768].astype(float) @ Ainv_g
         sandwich = newey_west_variance(u)
         return prior_part + np.maximum(sandwich, data_part) + self.prior_sensitivity(g)
 
