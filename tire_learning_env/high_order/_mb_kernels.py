@@ -26,15 +26,25 @@ State layout: ``S_*`` indices 0-28 are CommonRoad's ``x1..x29`` (0-based), then
 Parameter vector: ``MB_*`` indices (:func:`~tire_learning_env.high_order.plant.parameter_vector`),
 tire vector: ``TY_*`` indices (the order of :class:`~.params.Pac2002Tire`'s fields; the tire
 functions and their layout live in :mod:`._pac2002` and are re-exported here).
+
+The compiled functions here call :mod:`._pac2002`'s: the two files form one numba cache family,
+:data:`MB_FAMILY`, and this module stamps its cache with the digest of both
+(:func:`tire_learning_env._jit_cache.key_on_family`), so an edit to the tire functions recompiles
+the model that calls them (numba alone would only check this file).
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 from numba import njit
 
+from .._jit_cache import key_on_family
 from ._pac2002 import pac_lateral, pac_lateral_comb, pac_longitudinal, pac_longitudinal_comb
+
+#: The source files of the compiled multi-body model, callees first.
+MB_FAMILY = tuple(Path(__file__).with_name(name) for name in ("_pac2002.py", "_mb_kernels.py"))
 
 # --- state indices (CommonRoad x1..x29 -> 0..28) ---------------------------------------
 (
@@ -576,3 +586,6 @@ def plant_tick(x, err, delta_cmd, dt, v_ref, a_ff, p, ty, work, aux, truth, s_gu
     if not (math.isfinite(e1) and math.isfinite(e1d) and math.isfinite(e2) and math.isfinite(e2d)):
         ok = False
     return ok, s
+
+
+key_on_family(globals(), MB_FAMILY)
