@@ -74,6 +74,23 @@ def test_port_equals_commonroad_vehicle_dynamics_mb():
         np.testing.assert_allclose(f[:29], want, rtol=1e-12, atol=1e-12)
 
 
+def test_the_named_layouts_match_their_names():
+    """The port indexes state, wheels and camera errors by name: each name is the entry it says."""
+    from tire_learning_env.dynamics import StateIndex
+
+    assert (K.N_MB, K.N_STATE, len(K.STATE_NAMES)) == (29, 34, K.N_STATE)
+    named = {"S_X": "x", "S_Y": "y", "S_DELTA": "delta", "S_VX": "vx", "S_PSI": "psi", "S_R": "yaw_rate",
+             "S_VY": "vy", "S_Z": "z", "S_ROLL_F": "roll_f", "S_VY_R": "vy_r", "S_OMEGA_LF": "omega_lf",
+             "S_OMEGA_RR": "omega_rr", "S_DY_F": "delta_y_f", "S_DY_R": "delta_y_r", "S_LAG_LF": "lag_alpha_lf",
+             "S_LAG_RR": "lag_alpha_rr", "S_SPEED_INT": "speed_integral"}  # fmt: skip
+    for const, state_name in named.items():
+        assert K.STATE_NAMES[getattr(K, const)] == state_name, const
+    assert (K.W_LF, K.W_RF, K.W_LR, K.W_RR, K.N_WHEELS) == (0, 1, 2, 3, 4)
+    assert K.AUX_GAMMA + K.N_WHEELS == K.N_AUX
+    assert (K.ERR_E1, K.ERR_E1_DOT, K.ERR_E2, K.ERR_E2_DOT) == (StateIndex.E1, StateIndex.E1_DOT, StateIndex.E2,
+                                                               StateIndex.E2_DOT)  # fmt: skip
+
+
 def test_tire_functions_equal_commonroad():
     tm = pytest.importorskip("vehiclemodels.utils.tire_model")
     from vehiclemodels.parameters_vehicle2 import parameters_vehicle2

@@ -22,7 +22,10 @@ plant (four relaxation lags and the PI speed controller's integral); :func:`path
 gives the lane-camera errors of a pose relative to a tabulated path.
 
 State layout: ``S_*`` indices 0-28 are CommonRoad's ``x1..x29`` (0-based), then
-``S_LAG_LF..S_LAG_RR`` (lagged slip angles, CommonRoad sign) and ``S_SPEED_INT``.
+``S_LAG_LF..S_LAG_RR`` (lagged slip angles, CommonRoad sign) and ``S_SPEED_INT``; the port
+indexes the state and its derivative by these names only (``x[S_VY]`` for CommonRoad's ``x[10]``).
+Per-wheel blocks of ``aux``: ``AUX_* + W_LF..W_RR``; camera errors: ``ERR_*``
+(:class:`~tire_learning_env.dynamics.StateIndex`'s order).
 Parameter vector: ``MB_*`` indices (:func:`~tire_learning_env.high_order.plant.parameter_vector`),
 tire vector: ``TY_*`` indices (the order of :class:`~.params.Pac2002Tire`'s fields; the tire
 functions and their layout live in :mod:`._pac2002` and are re-exported here).
@@ -73,6 +76,13 @@ STATE_NAMES = (
     OPT_RELAX, OPT_TSTEER, OPT_KP, OPT_KI,
 ) = range(47)  # fmt: skip
 N_PAR = 47
+
+# --- wheels (the offset of a wheel in each per-wheel block of aux) ------------------------
+W_LF, W_RF, W_LR, W_RR = range(4)
+N_WHEELS = 4
+
+# --- lane-camera error state written by plant_tick (dynamics.StateIndex's order) -----------
+ERR_E1, ERR_E1_DOT, ERR_E2, ERR_E2_DOT = range(4)
 
 # --- auxiliary outputs of mb_rhs (per wheel LF, RF, LR, RR) -------------------------------
 AUX_ALPHA = 0  # kinematic slip angles, CommonRoad sign [rad] (4)
@@ -160,48 +170,48 @@ def mb_rhs(x, u_steer_rate, u_accel, p, ty, use_lag, f, aux):
     g = _G
     a, b = p[MB_A], p[MB_B]
     T_f, T_r, R_w = p[MB_TF], p[MB_TR], p[MB_RW]
-    u0 = _steering_constraints(x[2], u_steer_rate, p)
-    u1 = _acceleration_constraints(x[3], u_accel, p)
+    u0 = _steering_constraints(x[S_DELTA], u_steer_rate, p)
+    u1 = _acceleration_constraints(x[S_VX], u_accel, p)
 
-    if abs(x[3]) < 0.1:
+    if abs(x[S_VX]) < 0.1:
         beta = 0.0
     else:
-        beta = math.atan(x[10] / x[3])
-    vel = math.sqrt(x[3] ** 2 + x[10] ** 2)
+        beta = math.atan(x[S_VY] / x[S_VX])
+    vel = math.sqrt(x[S_VX] ** 2 + x[S_VY] ** 2)
 
     # vertical tire forces
-    F_z_LF = (x[16] + R_w * (math.cos(x[13]) - 1) - 0.5 * T_f * math.sin(x[13])) * p[MB_KZT]
-    F_z_RF = (x[16] + R_w * (math.cos(x[13]) - 1) + 0.5 * T_f * math.sin(x[13])) * p[MB_KZT]
-    F_z_LR = (x[21] + R_w * (math.cos(x[18]) - 1) - 0.5 * T_r * math.sin(x[18])) * p[MB_KZT]
-    F_z_RR = (x[21] + R_w * (math.cos(x[18]) - 1) + 0.5 * T_r * math.sin(x[18])) * p[MB_KZT]
+    F_z_LF = (x[S_Z_F] + R_w * (math.cos(x[S_ROLL_F]) - 1) - 0.5 * T_f * math.sin(x[S_ROLL_F])) * p[MB_KZT]
+    F_z_RF = (x[S_Z_F] + R_w * (math.cos(x[S_ROLL_F]) - 1) + 0.5 * T_f * math.sin(x[S_ROLL_F])) * p[MB_KZT]
+    F_z_LR = (x[S_Z_R] + R_w * (math.cos(x[S_ROLL_R]) - 1) - 0.5 * T_r * math.sin(x[S_ROLL_R])) * p[MB_KZT]
+    F_z_RR = (x[S_Z_R] + R_w * (math.cos(x[S_ROLL_R]) - 1) + 0.5 * T_r * math.sin(x[S_ROLL_R])) * p[MB_KZT]
 
     # individual tire speeds
-    u_w_lf = (x[3] + 0.5 * T_f * x[5]) * math.cos(x[2]) + (x[10] + a * x[5]) * math.sin(x[2])
-    u_w_rf = (x[3] - 0.5 * T_f * x[5]) * math.cos(x[2]) + (x[10] + a * x[5]) * math.sin(x[2])
-    u_w_lr = x[3] + 0.5 * T_r * x[5]
-    u_w_rr = x[3] - 0.5 * T_r * x[5]
+    u_w_lf = (x[S_VX] + 0.5 * T_f * x[S_R]) * math.cos(x[S_DELTA]) + (x[S_VY] + a * x[S_R]) * math.sin(x[S_DELTA])
+    u_w_rf = (x[S_VX] - 0.5 * T_f * x[S_R]) * math.cos(x[S_DELTA]) + (x[S_VY] + a * x[S_R]) * math.sin(x[S_DELTA])
+    u_w_lr = x[S_VX] + 0.5 * T_r * x[S_R]
+    u_w_rr = x[S_VX] - 0.5 * T_r * x[S_R]
     u_w_lf = _zero_if_negative(u_w_lf)
     u_w_rf = _zero_if_negative(u_w_rf)
     u_w_lr = _zero_if_negative(u_w_lr)
     u_w_rr = _zero_if_negative(u_w_rr)
 
     # longitudinal slip and lateral slip angles (kinematic); both zero below 0.1 m/s
-    if abs(x[3]) < 0.1:
+    if abs(x[S_VX]) < 0.1:
         s_lf = s_rf = s_lr = s_rr = 0.0
         alpha_LF = alpha_RF = alpha_LR = alpha_RR = 0.0
     else:
-        s_lf = 1 - R_w * x[23] / u_w_lf
-        s_rf = 1 - R_w * x[24] / u_w_rf
-        s_lr = 1 - R_w * x[25] / u_w_lr
-        s_rr = 1 - R_w * x[26] / u_w_rr
-        alpha_LF = math.atan((x[10] + a * x[5] - x[14] * (R_w - x[16])) / (x[3] + 0.5 * T_f * x[5])) - x[2]
-        alpha_RF = math.atan((x[10] + a * x[5] - x[14] * (R_w - x[16])) / (x[3] - 0.5 * T_f * x[5])) - x[2]
-        alpha_LR = math.atan((x[10] - b * x[5] - x[19] * (R_w - x[21])) / (x[3] + 0.5 * T_r * x[5]))
-        alpha_RR = math.atan((x[10] - b * x[5] - x[19] * (R_w - x[21])) / (x[3] - 0.5 * T_r * x[5]))
-    aux[AUX_ALPHA + 0] = alpha_LF
-    aux[AUX_ALPHA + 1] = alpha_RF
-    aux[AUX_ALPHA + 2] = alpha_LR
-    aux[AUX_ALPHA + 3] = alpha_RR
+        s_lf = 1 - R_w * x[S_OMEGA_LF] / u_w_lf
+        s_rf = 1 - R_w * x[S_OMEGA_RF] / u_w_rf
+        s_lr = 1 - R_w * x[S_OMEGA_LR] / u_w_lr
+        s_rr = 1 - R_w * x[S_OMEGA_RR] / u_w_rr
+        alpha_LF = math.atan((x[S_VY] + a * x[S_R] - x[S_ROLL_RATE_F] * (R_w - x[S_Z_F])) / (x[S_VX] + 0.5 * T_f * x[S_R])) - x[S_DELTA]
+        alpha_RF = math.atan((x[S_VY] + a * x[S_R] - x[S_ROLL_RATE_F] * (R_w - x[S_Z_F])) / (x[S_VX] - 0.5 * T_f * x[S_R])) - x[S_DELTA]
+        alpha_LR = math.atan((x[S_VY] - b * x[S_R] - x[S_ROLL_RATE_R] * (R_w - x[S_Z_R])) / (x[S_VX] + 0.5 * T_r * x[S_R]))
+        alpha_RR = math.atan((x[S_VY] - b * x[S_R] - x[S_ROLL_RATE_R] * (R_w - x[S_Z_R])) / (x[S_VX] - 0.5 * T_r * x[S_R]))
+    aux[AUX_ALPHA + W_LF] = alpha_LF
+    aux[AUX_ALPHA + W_RF] = alpha_RF
+    aux[AUX_ALPHA + W_LR] = alpha_LR
+    aux[AUX_ALPHA + W_RR] = alpha_RR
     if use_lag:  # tire relaxation: forces act on the lagged slip
         alpha_LF = x[S_LAG_LF]
         alpha_RF = x[S_LAG_RF]
@@ -210,21 +220,21 @@ def mb_rhs(x, u_steer_rate, u_accel, p, ty, use_lag, f, aux):
 
     # auxiliary suspension movement
     h_s = p[MB_HS]
-    z_SLF = (h_s - R_w + x[16] - x[11]) / math.cos(x[6]) - h_s + R_w + a * x[8] + 0.5 * (x[6] - x[13]) * T_f
-    z_SRF = (h_s - R_w + x[16] - x[11]) / math.cos(x[6]) - h_s + R_w + a * x[8] - 0.5 * (x[6] - x[13]) * T_f
-    z_SLR = (h_s - R_w + x[21] - x[11]) / math.cos(x[6]) - h_s + R_w - b * x[8] + 0.5 * (x[6] - x[18]) * T_r
-    z_SRR = (h_s - R_w + x[21] - x[11]) / math.cos(x[6]) - h_s + R_w - b * x[8] - 0.5 * (x[6] - x[18]) * T_r
+    z_SLF = (h_s - R_w + x[S_Z_F] - x[S_Z]) / math.cos(x[S_ROLL]) - h_s + R_w + a * x[S_PITCH] + 0.5 * (x[S_ROLL] - x[S_ROLL_F]) * T_f
+    z_SRF = (h_s - R_w + x[S_Z_F] - x[S_Z]) / math.cos(x[S_ROLL]) - h_s + R_w + a * x[S_PITCH] - 0.5 * (x[S_ROLL] - x[S_ROLL_F]) * T_f
+    z_SLR = (h_s - R_w + x[S_Z_R] - x[S_Z]) / math.cos(x[S_ROLL]) - h_s + R_w - b * x[S_PITCH] + 0.5 * (x[S_ROLL] - x[S_ROLL_R]) * T_r
+    z_SRR = (h_s - R_w + x[S_Z_R] - x[S_Z]) / math.cos(x[S_ROLL]) - h_s + R_w - b * x[S_PITCH] - 0.5 * (x[S_ROLL] - x[S_ROLL_R]) * T_r
 
-    dz_SLF = x[17] - x[12] + a * x[9] + 0.5 * (x[7] - x[14]) * T_f
-    dz_SRF = x[17] - x[12] + a * x[9] - 0.5 * (x[7] - x[14]) * T_f
-    dz_SLR = x[22] - x[12] - b * x[9] + 0.5 * (x[7] - x[19]) * T_r
-    dz_SRR = x[22] - x[12] - b * x[9] - 0.5 * (x[7] - x[19]) * T_r
+    dz_SLF = x[S_VZ_F] - x[S_VZ] + a * x[S_PITCH_RATE] + 0.5 * (x[S_ROLL_RATE] - x[S_ROLL_RATE_F]) * T_f
+    dz_SRF = x[S_VZ_F] - x[S_VZ] + a * x[S_PITCH_RATE] - 0.5 * (x[S_ROLL_RATE] - x[S_ROLL_RATE_F]) * T_f
+    dz_SLR = x[S_VZ_R] - x[S_VZ] - b * x[S_PITCH_RATE] + 0.5 * (x[S_ROLL_RATE] - x[S_ROLL_RATE_R]) * T_r
+    dz_SRR = x[S_VZ_R] - x[S_VZ] - b * x[S_PITCH_RATE] - 0.5 * (x[S_ROLL_RATE] - x[S_ROLL_RATE_R]) * T_r
 
     # camber angles
-    gamma_LF = x[6] + p[MB_DF] * z_SLF + p[MB_EF] * (z_SLF) ** 2
-    gamma_RF = x[6] - p[MB_DF] * z_SRF - p[MB_EF] * (z_SRF) ** 2
-    gamma_LR = x[6] + p[MB_DR] * z_SLR + p[MB_ER] * (z_SLR) ** 2
-    gamma_RR = x[6] - p[MB_DR] * z_SRR - p[MB_ER] * (z_SRR) ** 2
+    gamma_LF = x[S_ROLL] + p[MB_DF] * z_SLF + p[MB_EF] * (z_SLF) ** 2
+    gamma_RF = x[S_ROLL] - p[MB_DF] * z_SRF - p[MB_EF] * (z_SRF) ** 2
+    gamma_LR = x[S_ROLL] + p[MB_DR] * z_SLR + p[MB_ER] * (z_SLR) ** 2
+    gamma_RR = x[S_ROLL] - p[MB_DR] * z_SRR - p[MB_ER] * (z_SRR) ** 2
 
     # pure-slip forces
     F0_x_LF = pac_longitudinal(s_lf, gamma_LF, F_z_LF, ty)
@@ -247,29 +257,29 @@ def mb_rhs(x, u_steer_rate, u_accel, p, ty, use_lag, f, aux):
     F_y_RR = pac_lateral_comb(s_rr, alpha_RR, gamma_RR, mu_y_RR, F_z_RR, F0_y_RR, ty)
 
     # auxiliary movements for compliant joint equations
-    delta_z_f = h_s - R_w + x[16] - x[11]
-    delta_z_r = h_s - R_w + x[21] - x[11]
-    delta_phi_f = x[6] - x[13]
-    delta_phi_r = x[6] - x[18]
-    dot_delta_phi_f = x[7] - x[14]
-    dot_delta_phi_r = x[7] - x[19]
-    dot_delta_z_f = x[17] - x[12]
-    dot_delta_z_r = x[22] - x[12]
-    dot_delta_y_f = x[10] + a * x[5] - x[15]
-    dot_delta_y_r = x[10] - b * x[5] - x[20]
+    delta_z_f = h_s - R_w + x[S_Z_F] - x[S_Z]
+    delta_z_r = h_s - R_w + x[S_Z_R] - x[S_Z]
+    delta_phi_f = x[S_ROLL] - x[S_ROLL_F]
+    delta_phi_r = x[S_ROLL] - x[S_ROLL_R]
+    dot_delta_phi_f = x[S_ROLL_RATE] - x[S_ROLL_RATE_F]
+    dot_delta_phi_r = x[S_ROLL_RATE] - x[S_ROLL_RATE_R]
+    dot_delta_z_f = x[S_VZ_F] - x[S_VZ]
+    dot_delta_z_r = x[S_VZ_R] - x[S_VZ]
+    dot_delta_y_f = x[S_VY] + a * x[S_R] - x[S_VY_F]
+    dot_delta_y_r = x[S_VY] - b * x[S_R] - x[S_VY_R]
     h_raf, h_rar = p[MB_HRAF], p[MB_HRAR]
-    delta_f = delta_z_f * math.sin(x[6]) - x[27] * math.cos(x[6]) - (h_raf - R_w) * math.sin(delta_phi_f)
-    delta_r = delta_z_r * math.sin(x[6]) - x[28] * math.cos(x[6]) - (h_rar - R_w) * math.sin(delta_phi_r)
+    delta_f = delta_z_f * math.sin(x[S_ROLL]) - x[S_DY_F] * math.cos(x[S_ROLL]) - (h_raf - R_w) * math.sin(delta_phi_f)
+    delta_r = delta_z_r * math.sin(x[S_ROLL]) - x[S_DY_R] * math.cos(x[S_ROLL]) - (h_rar - R_w) * math.sin(delta_phi_r)
     dot_delta_f = (
-        (delta_z_f * math.cos(x[6]) + x[27] * math.sin(x[6])) * x[7]
-        + dot_delta_z_f * math.sin(x[6])
-        - dot_delta_y_f * math.cos(x[6])
+        (delta_z_f * math.cos(x[S_ROLL]) + x[S_DY_F] * math.sin(x[S_ROLL])) * x[S_ROLL_RATE]
+        + dot_delta_z_f * math.sin(x[S_ROLL])
+        - dot_delta_y_f * math.cos(x[S_ROLL])
         - (h_raf - R_w) * math.cos(delta_phi_f) * dot_delta_phi_f
     )
     dot_delta_r = (
-        (delta_z_r * math.cos(x[6]) + x[28] * math.sin(x[6])) * x[7]
-        + dot_delta_z_r * math.sin(x[6])
-        - dot_delta_y_r * math.cos(x[6])
+        (delta_z_r * math.cos(x[S_ROLL]) + x[S_DY_R] * math.sin(x[S_ROLL])) * x[S_ROLL_RATE]
+        + dot_delta_z_r * math.sin(x[S_ROLL])
+        - dot_delta_y_r * math.cos(x[S_ROLL])
         - (h_rar - R_w) * math.cos(delta_phi_r) * dot_delta_phi_r
     )
 
@@ -280,13 +290,13 @@ def mb_rhs(x, u_steer_rate, u_accel, p, ty, use_lag, f, aux):
     # suspension forces (bump stop, squat/lift neglected)
     m_s = p[MB_MS]
     L = a + b
-    F_SLF = m_s * g * b / (2 * (a + b)) - z_SLF * p[MB_KSF] - dz_SLF * p[MB_KSDF] + (x[6] - x[13]) * p[MB_KTSF] / T_f
-    F_SRF = m_s * g * b / (2 * (a + b)) - z_SRF * p[MB_KSF] - dz_SRF * p[MB_KSDF] - (x[6] - x[13]) * p[MB_KTSF] / T_f
-    F_SLR = m_s * g * a / (2 * (a + b)) - z_SLR * p[MB_KSR] - dz_SLR * p[MB_KSDR] + (x[6] - x[18]) * p[MB_KTSR] / T_r
-    F_SRR = m_s * g * a / (2 * (a + b)) - z_SRR * p[MB_KSR] - dz_SRR * p[MB_KSDR] - (x[6] - x[18]) * p[MB_KTSR] / T_r
+    F_SLF = m_s * g * b / (2 * (a + b)) - z_SLF * p[MB_KSF] - dz_SLF * p[MB_KSDF] + (x[S_ROLL] - x[S_ROLL_F]) * p[MB_KTSF] / T_f
+    F_SRF = m_s * g * b / (2 * (a + b)) - z_SRF * p[MB_KSF] - dz_SRF * p[MB_KSDF] - (x[S_ROLL] - x[S_ROLL_F]) * p[MB_KTSF] / T_f
+    F_SLR = m_s * g * a / (2 * (a + b)) - z_SLR * p[MB_KSR] - dz_SLR * p[MB_KSDR] + (x[S_ROLL] - x[S_ROLL_R]) * p[MB_KTSR] / T_r
+    F_SRR = m_s * g * a / (2 * (a + b)) - z_SRR * p[MB_KSR] - dz_SRR * p[MB_KSDR] - (x[S_ROLL] - x[S_ROLL_R]) * p[MB_KTSR] / T_r
 
     # sprung mass sums
-    c2, s2 = math.cos(x[2]), math.sin(x[2])
+    c2, s2 = math.cos(x[S_DELTA]), math.sin(x[S_DELTA])
     sumX = F_x_LR + F_x_RR + (F_x_LF + F_x_RF) * c2 - (F_y_LF + F_y_RF) * s2
     sumN = (
         (F_y_LF + F_y_RF) * a * c2
@@ -296,75 +306,75 @@ def mb_rhs(x, u_steer_rate, u_accel, p, ty, use_lag, f, aux):
         + (F_x_LR - F_x_RR) * 0.5 * T_r
         - (F_y_LR + F_y_RR) * b
     )
-    sumY_s = (F_RAF + F_RAR) * math.cos(x[6]) + (F_SLF + F_SLR + F_SRF + F_SRR) * math.sin(x[6])
+    sumY_s = (F_RAF + F_RAR) * math.cos(x[S_ROLL]) + (F_SLF + F_SLR + F_SRF + F_SRR) * math.sin(x[S_ROLL])
     sumL = (
         0.5 * F_SLF * T_f
         + 0.5 * F_SLR * T_r
         - 0.5 * F_SRF * T_f
         - 0.5 * F_SRR * T_r
-        - F_RAF / math.cos(x[6]) * (h_s - x[11] - R_w + x[16] - (h_raf - R_w) * math.cos(x[13]))
-        - F_RAR / math.cos(x[6]) * (h_s - x[11] - R_w + x[21] - (h_rar - R_w) * math.cos(x[18]))
+        - F_RAF / math.cos(x[S_ROLL]) * (h_s - x[S_Z] - R_w + x[S_Z_F] - (h_raf - R_w) * math.cos(x[S_ROLL_F]))
+        - F_RAR / math.cos(x[S_ROLL]) * (h_s - x[S_Z] - R_w + x[S_Z_R] - (h_rar - R_w) * math.cos(x[S_ROLL_R]))
     )
-    sumZ_s = (F_SLF + F_SLR + F_SRF + F_SRR) * math.cos(x[6]) - (F_RAF + F_RAR) * math.sin(x[6])
+    sumZ_s = (F_SLF + F_SLR + F_SRF + F_SRR) * math.cos(x[S_ROLL]) - (F_RAF + F_RAR) * math.sin(x[S_ROLL])
     sumM_s = a * (F_SLF + F_SRF) - b * (F_SLR + F_SRR) + (
         (F_x_LF + F_x_RF) * c2 - (F_y_LF + F_y_RF) * s2 + F_x_LR + F_x_RR
-    ) * (h_s - x[11])
+    ) * (h_s - x[S_Z])
 
     # unsprung mass sums
     K_lt = p[MB_KLT]
-    sumL_uf = _unsprung_roll_moment(F_SLF, F_SRF, T_f, F_RAF, h_raf, R_w, x[13], F_z_LF, F_z_RF, K_lt, F_y_LF, F_y_RF,
-                                    (F_y_LF + F_y_RF) * c2 + (F_x_LF + F_x_RF) * s2, x[16])  # fmt: skip
-    sumL_ur = _unsprung_roll_moment(F_SLR, F_SRR, T_r, F_RAR, h_rar, R_w, x[18], F_z_LR, F_z_RR, K_lt, F_y_LR, F_y_RR,
-                                    F_y_LR + F_y_RR, x[21])  # fmt: skip
-    sumZ_uf = F_z_LF + F_z_RF + F_RAF * math.sin(x[6]) - (F_SLF + F_SRF) * math.cos(x[6])
-    sumZ_ur = F_z_LR + F_z_RR + F_RAR * math.sin(x[6]) - (F_SLR + F_SRR) * math.cos(x[6])
-    sumY_uf = (F_y_LF + F_y_RF) * c2 + (F_x_LF + F_x_RF) * s2 - F_RAF * math.cos(x[6]) - (F_SLF + F_SRF) * math.sin(x[6])
-    sumY_ur = (F_y_LR + F_y_RR) - F_RAR * math.cos(x[6]) - (F_SLR + F_SRR) * math.sin(x[6])
+    sumL_uf = _unsprung_roll_moment(F_SLF, F_SRF, T_f, F_RAF, h_raf, R_w, x[S_ROLL_F], F_z_LF, F_z_RF, K_lt, F_y_LF, F_y_RF,
+                                    (F_y_LF + F_y_RF) * c2 + (F_x_LF + F_x_RF) * s2, x[S_Z_F])  # fmt: skip
+    sumL_ur = _unsprung_roll_moment(F_SLR, F_SRR, T_r, F_RAR, h_rar, R_w, x[S_ROLL_R], F_z_LR, F_z_RR, K_lt, F_y_LR, F_y_RR,
+                                    F_y_LR + F_y_RR, x[S_Z_R])  # fmt: skip
+    sumZ_uf = F_z_LF + F_z_RF + F_RAF * math.sin(x[S_ROLL]) - (F_SLF + F_SRF) * math.cos(x[S_ROLL])
+    sumZ_ur = F_z_LR + F_z_RR + F_RAR * math.sin(x[S_ROLL]) - (F_SLR + F_SRR) * math.cos(x[S_ROLL])
+    sumY_uf = (F_y_LF + F_y_RF) * c2 + (F_x_LF + F_x_RF) * s2 - F_RAF * math.cos(x[S_ROLL]) - (F_SLF + F_SRF) * math.sin(x[S_ROLL])
+    sumY_ur = (F_y_LR + F_y_RR) - F_RAR * math.cos(x[S_ROLL]) - (F_SLR + F_SRR) * math.sin(x[S_ROLL])
 
     I_z, I_xz, I_phi = p[MB_IZ], p[MB_IXZ], p[MB_IPHI]
-    if abs(x[3]) < 0.1:
+    if abs(x[S_VX]) < 0.1:
         # kinematic single-track model at the centre of mass (vehicle_dynamics_ks_cog)
         lwb = L
-        beta_ks = math.atan(math.tan(x[2]) * b / lwb)
-        f[0] = x[3] * math.cos(beta_ks + x[4])
-        f[1] = x[3] * math.sin(beta_ks + x[4])
-        f[2] = u0
-        f[3] = u1
-        f[4] = x[3] * math.cos(beta_ks) * math.tan(x[2]) / lwb
-        d_beta = (b * u0) / (lwb * math.cos(x[2]) ** 2 * (1 + (math.tan(x[2]) ** 2 * b / lwb) ** 2))
-        f[5] = 1 / lwb * (
-            u1 * math.cos(x[6]) * math.tan(x[2])
-            - x[3] * math.sin(x[6]) * d_beta * math.tan(x[2])
-            + x[3] * math.cos(x[6]) * u0 / math.cos(x[2]) ** 2
+        beta_ks = math.atan(math.tan(x[S_DELTA]) * b / lwb)
+        f[S_X] = x[S_VX] * math.cos(beta_ks + x[S_PSI])
+        f[S_Y] = x[S_VX] * math.sin(beta_ks + x[S_PSI])
+        f[S_DELTA] = u0
+        f[S_VX] = u1
+        f[S_PSI] = x[S_VX] * math.cos(beta_ks) * math.tan(x[S_DELTA]) / lwb
+        d_beta = (b * u0) / (lwb * math.cos(x[S_DELTA]) ** 2 * (1 + (math.tan(x[S_DELTA]) ** 2 * b / lwb) ** 2))
+        f[S_R] = 1 / lwb * (
+            u1 * math.cos(x[S_ROLL]) * math.tan(x[S_DELTA])
+            - x[S_VX] * math.sin(x[S_ROLL]) * d_beta * math.tan(x[S_DELTA])
+            + x[S_VX] * math.cos(x[S_ROLL]) * u0 / math.cos(x[S_DELTA]) ** 2
         )
     else:
-        f[0] = math.cos(beta + x[4]) * vel
-        f[1] = math.sin(beta + x[4]) * vel
-        f[2] = u0
-        f[3] = 1 / p[MB_M] * sumX + x[5] * x[10]
-        f[4] = x[5]
-        f[5] = 1 / (I_z - (I_xz) ** 2 / I_phi) * (sumN + I_xz / I_phi * sumL)
+        f[S_X] = math.cos(beta + x[S_PSI]) * vel
+        f[S_Y] = math.sin(beta + x[S_PSI]) * vel
+        f[S_DELTA] = u0
+        f[S_VX] = 1 / p[MB_M] * sumX + x[S_R] * x[S_VY]
+        f[S_PSI] = x[S_R]
+        f[S_R] = 1 / (I_z - (I_xz) ** 2 / I_phi) * (sumN + I_xz / I_phi * sumL)
 
     # remaining sprung mass dynamics
-    f[6] = x[7]
-    f[7] = 1 / (I_phi - (I_xz) ** 2 / I_z) * (I_xz / I_z * sumN + sumL)
-    f[8] = x[9]
-    f[9] = 1 / p[MB_IY] * sumM_s
-    f[10] = 1 / m_s * sumY_s - x[5] * x[3]
-    f[11] = x[12]
-    f[12] = g - 1 / m_s * sumZ_s
+    f[S_ROLL] = x[S_ROLL_RATE]
+    f[S_ROLL_RATE] = 1 / (I_phi - (I_xz) ** 2 / I_z) * (I_xz / I_z * sumN + sumL)
+    f[S_PITCH] = x[S_PITCH_RATE]
+    f[S_PITCH_RATE] = 1 / p[MB_IY] * sumM_s
+    f[S_VY] = 1 / m_s * sumY_s - x[S_R] * x[S_VX]
+    f[S_Z] = x[S_VZ]
+    f[S_VZ] = g - 1 / m_s * sumZ_s
     # unsprung mass dynamics (front)
-    f[13] = x[14]
-    f[14] = 1 / p[MB_IUF] * sumL_uf
-    f[15] = 1 / p[MB_MUF] * sumY_uf - x[5] * x[3]
-    f[16] = x[17]
-    f[17] = g - 1 / p[MB_MUF] * sumZ_uf
+    f[S_ROLL_F] = x[S_ROLL_RATE_F]
+    f[S_ROLL_RATE_F] = 1 / p[MB_IUF] * sumL_uf
+    f[S_VY_F] = 1 / p[MB_MUF] * sumY_uf - x[S_R] * x[S_VX]
+    f[S_Z_F] = x[S_VZ_F]
+    f[S_VZ_F] = g - 1 / p[MB_MUF] * sumZ_uf
     # unsprung mass dynamics (rear)
-    f[18] = x[19]
-    f[19] = 1 / p[MB_IUR] * sumL_ur
-    f[20] = 1 / p[MB_MUR] * sumY_ur - x[5] * x[3]
-    f[21] = x[22]
-    f[22] = g - 1 / p[MB_MUR] * sumZ_ur
+    f[S_ROLL_R] = x[S_ROLL_RATE_R]
+    f[S_ROLL_RATE_R] = 1 / p[MB_IUR] * sumL_ur
+    f[S_VY_R] = 1 / p[MB_MUR] * sumY_ur - x[S_R] * x[S_VX]
+    f[S_Z_R] = x[S_VZ_R]
+    f[S_VZ_R] = g - 1 / p[MB_MUR] * sumZ_ur
 
     # acceleration input to brake and engine torque
     if u1 > 0:
@@ -374,42 +384,42 @@ def mb_rhs(x, u_steer_rate, u_accel, p, ty, use_lag, f, aux):
         T_B = p[MB_M] * R_w * u1
         T_E = 0.0
     T_sb, T_se, I_y_w = p[MB_TSB], p[MB_TSE], p[MB_IYW]
-    f[23] = 1 / I_y_w * (-R_w * F_x_LF + 0.5 * T_sb * T_B + 0.5 * T_se * T_E)
-    f[24] = 1 / I_y_w * (-R_w * F_x_RF + 0.5 * T_sb * T_B + 0.5 * T_se * T_E)
-    f[25] = 1 / I_y_w * (-R_w * F_x_LR + 0.5 * (1 - T_sb) * T_B + 0.5 * (1 - T_se) * T_E)
-    f[26] = 1 / I_y_w * (-R_w * F_x_RR + 0.5 * (1 - T_sb) * T_B + 0.5 * (1 - T_se) * T_E)
+    f[S_OMEGA_LF] = 1 / I_y_w * (-R_w * F_x_LF + 0.5 * T_sb * T_B + 0.5 * T_se * T_E)
+    f[S_OMEGA_RF] = 1 / I_y_w * (-R_w * F_x_RF + 0.5 * T_sb * T_B + 0.5 * T_se * T_E)
+    f[S_OMEGA_LR] = 1 / I_y_w * (-R_w * F_x_LR + 0.5 * (1 - T_sb) * T_B + 0.5 * (1 - T_se) * T_E)
+    f[S_OMEGA_RR] = 1 / I_y_w * (-R_w * F_x_RR + 0.5 * (1 - T_sb) * T_B + 0.5 * (1 - T_se) * T_E)
     # negative wheel spin forbidden (CommonRoad also clamps the state; the integrator does)
-    for i in range(23, 27):
+    for i in range(S_OMEGA_LF, S_OMEGA_RR + 1):
         if x[i] < 0.0:
             f[i] = 0.0
     # compliant joint equations
-    f[27] = dot_delta_y_f
-    f[28] = dot_delta_y_r
+    f[S_DY_F] = dot_delta_y_f
+    f[S_DY_R] = dot_delta_y_r
 
-    aux[AUX_UW + 0] = u_w_lf
-    aux[AUX_UW + 1] = u_w_rf
-    aux[AUX_UW + 2] = u_w_lr
-    aux[AUX_UW + 3] = u_w_rr
-    aux[AUX_FX + 0] = F_x_LF
-    aux[AUX_FX + 1] = F_x_RF
-    aux[AUX_FX + 2] = F_x_LR
-    aux[AUX_FX + 3] = F_x_RR
-    aux[AUX_FY + 0] = F_y_LF
-    aux[AUX_FY + 1] = F_y_RF
-    aux[AUX_FY + 2] = F_y_LR
-    aux[AUX_FY + 3] = F_y_RR
-    aux[AUX_FZ + 0] = F_z_LF
-    aux[AUX_FZ + 1] = F_z_RF
-    aux[AUX_FZ + 2] = F_z_LR
-    aux[AUX_FZ + 3] = F_z_RR
-    aux[AUX_KAPPA + 0] = s_lf
-    aux[AUX_KAPPA + 1] = s_rf
-    aux[AUX_KAPPA + 2] = s_lr
-    aux[AUX_KAPPA + 3] = s_rr
-    aux[AUX_GAMMA + 0] = gamma_LF
-    aux[AUX_GAMMA + 1] = gamma_RF
-    aux[AUX_GAMMA + 2] = gamma_LR
-    aux[AUX_GAMMA + 3] = gamma_RR
+    aux[AUX_UW + W_LF] = u_w_lf
+    aux[AUX_UW + W_RF] = u_w_rf
+    aux[AUX_UW + W_LR] = u_w_lr
+    aux[AUX_UW + W_RR] = u_w_rr
+    aux[AUX_FX + W_LF] = F_x_LF
+    aux[AUX_FX + W_RF] = F_x_RF
+    aux[AUX_FX + W_LR] = F_x_LR
+    aux[AUX_FX + W_RR] = F_x_RR
+    aux[AUX_FY + W_LF] = F_y_LF
+    aux[AUX_FY + W_RF] = F_y_RF
+    aux[AUX_FY + W_LR] = F_y_LR
+    aux[AUX_FY + W_RR] = F_y_RR
+    aux[AUX_FZ + W_LF] = F_z_LF
+    aux[AUX_FZ + W_RF] = F_z_RF
+    aux[AUX_FZ + W_LR] = F_z_LR
+    aux[AUX_FZ + W_RR] = F_z_RR
+    aux[AUX_KAPPA + W_LF] = s_lf
+    aux[AUX_KAPPA + W_RF] = s_rf
+    aux[AUX_KAPPA + W_LR] = s_lr
+    aux[AUX_KAPPA + W_RR] = s_rr
+    aux[AUX_GAMMA + W_LF] = gamma_LF
+    aux[AUX_GAMMA + W_RF] = gamma_RF
+    aux[AUX_GAMMA + W_LR] = gamma_LR
+    aux[AUX_GAMMA + W_RR] = gamma_RR
 
 
 @njit(cache=True)
@@ -428,7 +438,7 @@ def plant_rhs(x, delta_cmd, v_ref, a_ff, p, ty, f, aux):
     u1 = a_ff + p[OPT_KP] * ev + p[OPT_KI] * x[S_SPEED_INT]
     sigma = p[OPT_RELAX]
     mb_rhs(x, u0, u1, p, ty, sigma > 0.0, f, aux)
-    for i in range(4):
+    for i in range(N_WHEELS):
         if sigma > 0.0:
             f[S_LAG_LF + i] = abs(aux[AUX_UW + i]) / sigma * (aux[AUX_ALPHA + i] - x[S_LAG_LF + i])
         else:
@@ -457,8 +467,8 @@ def truth_from_rhs(x, f, aux, p, out):
     d = x[S_DELTA]
     vx, vy, r = x[S_VX], x[S_VY], x[S_R]
     c, s = math.cos(d), math.sin(d)
-    out[TR_FYF] = (aux[AUX_FY + 0] + aux[AUX_FY + 1]) * c + (aux[AUX_FX + 0] + aux[AUX_FX + 1]) * s
-    out[TR_FYR] = aux[AUX_FY + 2] + aux[AUX_FY + 3]
+    out[TR_FYF] = (aux[AUX_FY + W_LF] + aux[AUX_FY + W_RF]) * c + (aux[AUX_FX + W_LF] + aux[AUX_FX + W_RF]) * s
+    out[TR_FYR] = aux[AUX_FY + W_LR] + aux[AUX_FY + W_RR]
     out[TR_ALPHA_F] = d - (vy + p[MB_A] * r) / vx
     out[TR_ALPHA_R] = (p[MB_B] * r - vy) / vx
     out[TR_YAW_RATE] = r
@@ -579,10 +589,10 @@ def plant_tick(x, err, delta_cmd, dt, v_ref, a_ff, p, ty, work, aux, truth, s_gu
     """
     ok = plant_rk4_step(x, delta_cmd, dt, v_ref, a_ff, p, ty, work, aux, truth)
     s, e1, e1d, e2, e2d = path_errors(x[S_X], x[S_Y], x[S_PSI], x[S_VX], x[S_VY], x[S_R], s_guess, px, py, ph, pk, ds)
-    err[0] = e1
-    err[1] = e1d
-    err[2] = e2
-    err[3] = e2d
+    err[ERR_E1] = e1
+    err[ERR_E1_DOT] = e1d
+    err[ERR_E2] = e2
+    err[ERR_E2_DOT] = e2d
     if not (math.isfinite(e1) and math.isfinite(e1d) and math.isfinite(e2) and math.isfinite(e2d)):
         ok = False
     return ok, s

@@ -19,6 +19,8 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
+from ..dynamics import StateIndex
+from ..envs import OBSERVATION_NAMES
 from ..metrics import AXLES, convergence_time, curve_nrmse, excited_range
 from ..observer import ObserverConfig
 from ..params import VehicleParams, coerce_params
@@ -67,6 +69,8 @@ EXCITATION_OBSERVATION_NAMES = (
     "J - J0 (information gained) / 10",
 )
 _OBS_BOUND = 10.0
+# the base envs' observation entries read at reset
+_OBS_VX, _OBS_KAPPA = OBSERVATION_NAMES.index("vx"), OBSERVATION_NAMES.index("kappa")
 
 
 class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -235,7 +239,7 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         # the base envs observe [e1, e2, frame age, vx, kappa, delta]: start speed and curvature
         # (the highway ego starts slower than the nominal speed)
         self._last = {"e1_cam": 0.0, "e2_cam": 0.0, "ay": 0.0, "ay_max": 0.0, "delta": 0.0,
-                      "kappa": float(obs[4]), "vx": float(obs[3])}  # fmt: skip
+                      "kappa": float(obs[_OBS_KAPPA]), "vx": float(obs[_OBS_VX])}  # fmt: skip
         self._reset_records()
         if self.truth_draw is not None:
             info["truth_draw"] = dict(self.truth_draw)
@@ -275,7 +279,7 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             self._last["e2_cam"] = float(log["e2"][frames[-1]])
         self._last.update(ay=float(ay[-1]), ay_max=ay_max, delta=float(log["delta"][-1]),
                           kappa=float(log["kappa"][-1]), vx=float(log["vx"][-1]))  # fmt: skip
-        e1_hat = float(est["state"][0])
+        e1_hat = float(est["state"][StateIndex.E1])
 
         # reward: information gained (or, simulation only, true error decrease) minus penalties
         j = self.information()
@@ -297,7 +301,7 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._t = float(info.get("t", self._t + self.dt_policy))
         true_e1 = None
         if "truth_log" in info:
-            true_e1 = float(np.max(np.abs(info["truth_log"]["true_state"][:, 0])))
+            true_e1 = float(np.max(np.abs(info["truth_log"]["true_state"][:, StateIndex.E1])))
         info["excitation"] = {
             "information": j,
             "information_initial": self._j0,
@@ -335,10 +339,10 @@ class ExcitationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         head = [
             last["e1_cam"] / cfg.lane_margin,
             last["e2_cam"] / 0.05,
-            x[0] / cfg.lane_margin,
-            x[1] / 1.0,
-            x[2] / 0.05,
-            x[3] / 0.2,
+            x[StateIndex.E1] / cfg.lane_margin,
+            x[StateIndex.E1_DOT] / 1.0,
+            x[StateIndex.E2] / 0.05,
+            x[StateIndex.E2_DOT] / 0.2,
             slip[0] / self.target[0],
             slip[1] / self.target[1],
             last["ay"] / cfg.ay_limit,
