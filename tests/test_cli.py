@@ -129,15 +129,6 @@ def test_reproduce_all_refuses_options_it_would_ignore(tmp_path, capsys, monkeyp
 # --- issue 17 item 3: the vehicle used and its source in every report --------------------------------
 
 
-def test_reproduce_metrics_name_the_vehicle_and_its_source():
-    from tire_learning_env.studies import _describe, study_spec
-
-    for study in (1, 2, 3):
-        described = _describe(study_spec(study, 1.0))
-        assert described["nominal_vehicle"]["Cf"] > 0 and described["true_vehicle"]["m"] > 0
-        assert f"study {study}" in described["vehicle_source"]
-
-
 VEHICLE = {"m": 1500.0, "Iz": 2900.0, "lf": 1.2, "lr": 1.6, "Cf": 80000.0, "Cr": 90000.0}
 
 

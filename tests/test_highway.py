@@ -438,17 +438,6 @@ def test_render_rgb_array_headless(env_id):
     env.close()
 
 
-def test_episode_saved_as_gif(tmp_path):
-    from PIL import Image
-
-    from tire_learning_env.rendering import record_episode
-
-    out = record_episode("TireLearning-Highway-v0", tmp_path / "ep.gif", seconds=0.5, seed=1, config={"vehicles_count": 5})
-    assert out["frames"] == 11
-    with Image.open(tmp_path / "ep.gif") as gif:
-        assert gif.n_frames == 11 and gif.size == (600, 150)
-
-
 def test_vector_env():
     envs = gym.make_vec("TireLearning-Racetrack-v0", num_envs=2, vectorization_mode="sync")
     obs, _ = envs.reset(seed=[1, 2])

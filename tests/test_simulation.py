@@ -59,30 +59,6 @@ def test_ay_guard_clamps_the_steering_at_every_tick():
         sim.driver.set_ay_guard(3.0, 2.0, 1.0)
 
 
-def test_camera_rate_latency_and_dropouts():
-    camera = CameraParams(rate=20.0, latency=0.1, dropout_probability=0.3)
-    log = simulate("study1", 10.0, camera=camera, seed=1)
-    t, e1 = log.sensors["t"], log.sensors["e1"]
-    arrived = ~np.isnan(e1)
-    # 20 Hz frames, each delivered 0.1 s after it showed
-    frame_times = np.round(np.arange(0.0, 10.0 - 0.1 - 1e-9, 0.05) + 0.1, 6)
-    delivered = np.round(t[arrived], 6)
-    assert set(delivered) <= set(frame_times)
-    lost = 1 - len(delivered) / len(frame_times)
-    assert 0.2 < lost < 0.4
-    # a delivered frame equals the truth 0.1 s earlier (no noise configured)
-    idx = np.flatnonzero(arrived)
-    np.testing.assert_allclose(e1[idx], log.truth["true_state"][idx - 100, 0], atol=1e-12)
-
-
-def test_uniform_noise_has_the_configured_width():
-    log = simulate("straight", 20.0, camera=CameraParams.paper_noise(rate=100.0), seed=2)
-    err = log.sensors["e1"] - log.truth["true_state"][:, 0]
-    err = err[~np.isnan(err)]
-    assert np.abs(err).max() <= 0.01
-    assert np.std(err) == pytest.approx(0.01 / np.sqrt(3), rel=0.1)
-
-
 def test_custom_tire_runs_through_the_compiled_loop():
     v = VehicleParams()
     pac = PacejkaTire.for_axle(v, __import__("tire_learning_env").TireParams(), "front")
@@ -99,28 +75,6 @@ def test_blow_up_raises_with_time_and_state():
     sim.reset(np.random.default_rng(0), xi0=[0.0, 1e308, 0.0, 1e308])
     with pytest.raises(FloatingPointError, match=r"t=0\.0000 s"):
         sim.advance(5)
-
-
-def test_log_rows_have_one_named_index_per_column():
-    """The loops write rows through ``LOG_*`` names (``record_tick``); each name is its column."""
-    from tire_learning_env import _kernels as K
-
-    assert [getattr(K, "LOG_" + name.upper()) for name in K.LOG_COLUMNS] == list(range(K.N_LOG))
-    assert K.LOG_INDEX == {name: i for i, name in enumerate(K.LOG_COLUMNS)}
-    values = dict(t=1.0, delta=2.0, vx=3.0, ax=4.0, kappa=5.0, psi_dot_des=6.0, psi_ddot_des=7.0, e1=8.0, e2=9.0,
-                  yaw_rate=10.0, ay=11.0, true_e1=12.0, true_e1_dot=13.0, true_e2=14.0, true_e2_dot=15.0,
-                  alpha_f=16.0, alpha_r=17.0, Fyf=18.0, Fyr=19.0, s=20.0)  # fmt: skip
-    for delivered in (True, False):
-        out = np.full((2, K.N_LOG), -1.0)
-        K.record_true_state(out, 1, np.array([values[k] for k in ("true_e1", "true_e1_dot", "true_e2", "true_e2_dot")] + [0.0, 0.0]))
-        K.record_tick(out, 1, *(values[k] for k in ("t", "delta", "vx", "ax", "kappa", "psi_dot_des", "psi_ddot_des")),
-                      delivered, values["e1"], values["e2"],
-                      *(values[k] for k in ("yaw_rate", "ay", "alpha_f", "alpha_r", "Fyf", "Fyr", "s")))  # fmt: skip
-        row = dict(zip(K.LOG_COLUMNS, out[1]))
-        assert np.all(out[0] == -1.0)
-        if not delivered:  # no frame delivered: NaN camera columns
-            assert np.isnan(row.pop("e1")) and np.isnan(row.pop("e2"))
-        assert row == {k: values[k] for k in row}
 
 
 def test_speed_profile_runs_keep_their_midpoint_lookup():
