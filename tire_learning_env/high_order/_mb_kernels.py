@@ -77,14 +77,12 @@ STATE_NAMES = (
 ) = range(47)  # fmt: skip
 N_PAR = 47
 
-# --- wheels (the offset of a wheel in each per-wheel block of aux) ------------------------
-W_LF, W_RF, W_LR, W_RR = range(4)
-N_WHEELS = 4
-
 # --- lane-camera error state written by plant_tick (dynamics.StateIndex's order) -----------
 ERR_E1, ERR_E1_DOT, ERR_E2, ERR_E2_DOT = range(4)
 
-# --- auxiliary outputs of mb_rhs (per wheel LF, RF, LR, RR) -------------------------------
+# --- auxiliary outputs of mb_rhs: blocks of N_WHEELS, a wheel at offset W_* in each -------
+W_LF, W_RF, W_LR, W_RR = range(4)
+N_WHEELS = 4
 AUX_ALPHA = 0  # kinematic slip angles, CommonRoad sign [rad] (4)
 AUX_UW = 4  # wheel longitudinal speeds [m/s] (4)
 AUX_FX = 8  # longitudinal tire forces, wheel frame [N] (4)
