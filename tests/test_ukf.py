@@ -131,3 +131,15 @@ def test_run_ukf_baseline_result_carries_the_learned_curve(lane_changes):
     assert len(times) == 6 and times[0] == 0.0
     assert curve_at(5)(0.01, "front") == pytest.approx(res.axle_force(0.01, "front", k=50000))
     assert res.runtime_s > 0
+
+
+def test_the_filter_state_is_indexed_by_its_names():
+    """The UKF's kernels index the state by ``X_*``: each is its entry of STATE_NAMES, the error state in
+    StateIndex's order."""
+    from tire_learning_env.baselines import ukf
+    from tire_learning_env.dynamics import StateIndex
+
+    for name in ukf.STATE_NAMES:
+        assert ukf.STATE_NAMES[getattr(ukf, "X_" + name.upper())] == name
+    assert [ukf.X_E1, ukf.X_E1_DOT, ukf.X_E2, ukf.X_E2_DOT] == list(StateIndex) and ukf.N_ERR == len(StateIndex)
+    assert len(ukf.STATE_NAMES) == ukf.N_X

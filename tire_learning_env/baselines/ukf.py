@@ -48,6 +48,9 @@ __all__ = ["JointUKF", "UKFResult", "run_ukf_baseline", "pacejka_axle_force", "P
 
 STATE_NAMES = ("e1", "e1_dot", "e2", "e2_dot", "log_cf", "log_cr", "log_mu_f", "log_mu_r")
 PARAM_NAMES = ("Cf", "Cr", "mu_f", "mu_r")
+# filter state (STATE_NAMES): the error state (dynamics.StateIndex's order), then the log-parameters
+X_E1, X_E1_DOT, X_E2, X_E2_DOT, X_LOG_CF, X_LOG_CR, X_LOG_MU_F, X_LOG_MU_R = range(8)
+N_ERR = 4  # the error-state prefix
 N_X = 8
 N_SIGMA = 2 * N_X + 1
 # constants vector
@@ -68,23 +71,23 @@ def _axle_force(alpha, stiffness, peak, cs, e):
 def _forces(s, delta, vx, pdd, k):
     """Slips (eq. 13) and axle forces of filter state ``s`` -> ``(af, ar, Ff, Fr)``."""
     lf, lr = k[K_LF], k[K_LR]
-    vy = s[1] - vx * s[2]
-    r = s[3] + pdd
+    vy = s[X_E1_DOT] - vx * s[X_E2]
+    r = s[X_E2_DOT] + pdd
     af = delta - (vy + lf * r) / vx
     ar = (lr * r - vy) / vx
-    ff = _axle_force(af, 2.0 * k[K_CF0] * math.exp(s[4]), math.exp(s[6]) * k[K_FZF], k[K_CS], k[K_E])
-    fr = _axle_force(ar, 2.0 * k[K_CR0] * math.exp(s[5]), math.exp(s[7]) * k[K_FZR], k[K_CS], k[K_E])
+    ff = _axle_force(af, 2.0 * k[K_CF0] * math.exp(s[X_LOG_CF]), math.exp(s[X_LOG_MU_F]) * k[K_FZF], k[K_CS], k[K_E])
+    fr = _axle_force(ar, 2.0 * k[K_CR0] * math.exp(s[X_LOG_CR]), math.exp(s[X_LOG_MU_R]) * k[K_FZR], k[K_CS], k[K_E])
     return af, ar, ff, fr
 
 
 @njit(cache=True)
 def _rhs(s, delta, vx, ax, pdd, pddd, k, out):
     _, _, ff, fr = _forces(s, delta, vx, pdd, k)
-    out[0] = s[1]
-    out[1] = (ff + fr) / k[K_M] - vx * pdd + ax * s[2]
-    out[2] = s[3]
-    out[3] = (k[K_LF] * ff - k[K_LR] * fr) / k[K_IZ] - pddd
-    for i in range(4, N_X):
+    out[X_E1] = s[X_E1_DOT]
+    out[X_E1_DOT] = (ff + fr) / k[K_M] - vx * pdd + ax * s[X_E2]
+    out[X_E2] = s[X_E2_DOT]
+    out[X_E2_DOT] = (k[K_LF] * ff - k[K_LR] * fr) / k[K_IZ] - pddd
+    for i in range(X_LOG_CF, N_X):
         out[i] = 0.0
 
 
@@ -164,21 +167,21 @@ def ukf_predict(x, P, q, dt, delta, vx, ax, pdd, pddd, k, wm, wc, gamma, sig, wo
 def ukf_update(x, P, z1, z2, r1, r2):
     """Kalman update with the camera frame ``z = [e1, e2]`` (variances ``r1``, ``r2``), in place."""
     n = N_X
-    s11 = P[0, 0] + r1
-    s12 = P[0, 2]
-    s22 = P[2, 2] + r2
+    s11 = P[X_E1, X_E1] + r1
+    s12 = P[X_E1, X_E2]
+    s22 = P[X_E2, X_E2] + r2
     det = s11 * s22 - s12 * s12
     i11, i12, i22 = s22 / det, -s12 / det, s11 / det
-    y1, y2 = z1 - x[0], z2 - x[2]
+    y1, y2 = z1 - x[X_E1], z2 - x[X_E2]
     Kg = np.empty((n, 2))
     for i in range(n):
-        Kg[i, 0] = P[i, 0] * i11 + P[i, 2] * i12
-        Kg[i, 1] = P[i, 0] * i12 + P[i, 2] * i22
+        Kg[i, 0] = P[i, X_E1] * i11 + P[i, X_E2] * i12
+        Kg[i, 1] = P[i, X_E1] * i12 + P[i, X_E2] * i22
     for i in range(n):
         x[i] += Kg[i, 0] * y1 + Kg[i, 1] * y2
     # P <- P - K S K^T = P - K [P(0,:); P(2,:)]
-    row0 = P[0].copy()
-    row2 = P[2].copy()
+    row0 = P[X_E1].copy()
+    row2 = P[X_E2].copy()
     for i in range(n):
         for j in range(n):
             P[i, j] -= Kg[i, 0] * row0[j] + Kg[i, 1] * row2[j]
@@ -408,8 +411,8 @@ class JointUKF:
         """Back to the prior: ``xi0`` (default 0), nominal stiffness, friction ``tire.mu``."""
         x = np.zeros(N_X)
         if xi0 is not None:
-            x[:4] = np.asarray(xi0, dtype=float).reshape(4)
-        x[6] = x[7] = math.log(self.tire.mu)
+            x[:N_ERR] = np.asarray(xi0, dtype=float).reshape(N_ERR)
+        x[X_LOG_MU_F] = x[X_LOG_MU_R] = math.log(self.tire.mu)
         self.x_ = x
         self.P_ = np.diag(np.array([*self.initial_state_std, self.stiffness_std, self.stiffness_std, self.mu_std, self.mu_std]) ** 2)
         return self
@@ -476,10 +479,11 @@ class JointUKF:
         if done < n:
             raise FloatingPointError(f"UKF estimate became non-finite at t={t[done]:.4f} s: {dict(zip(STATE_NAMES, out_x[done]))}")
         params = np.column_stack(
-            [self.vehicle.Cf * np.exp(out_x[:, 4]), self.vehicle.Cr * np.exp(out_x[:, 5]), np.exp(out_x[:, 6]), np.exp(out_x[:, 7])]
+            [self.vehicle.Cf * np.exp(out_x[:, X_LOG_CF]), self.vehicle.Cr * np.exp(out_x[:, X_LOG_CR]), np.exp(out_x[:, X_LOG_MU_F]),
+             np.exp(out_x[:, X_LOG_MU_R])]
         )
         self.result_ = UKFResult(
-            t=t, xi=out_x[:, :4], slip=aux[:, :2], force=aux[:, 2:], params=params, std=np.sqrt(np.maximum(out_pd, 0.0)),
+            t=t, xi=out_x[:, :N_ERR], slip=aux[:, :2], force=aux[:, 2:], params=params, std=np.sqrt(np.maximum(out_pd, 0.0)),
             axle_loads=self.vehicle.static_axle_loads, shape=self.tire.shape, curvature=self.tire.curvature,
             runtime_s=time.perf_counter() - t0,
         )  # fmt: skip
