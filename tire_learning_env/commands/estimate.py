@@ -166,7 +166,7 @@ def _stiffness_text(summary: dict) -> str:
 def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
     from .. import plotting
     from ..metrics import AXLES, compute_metrics, excited_range
-    from ..observer import estimate
+    from ..observer import StateIndex, estimate
 
     frames = np.flatnonzero(np.isfinite(log.sensors["e1"]))
     if len(frames) < 10:
@@ -240,9 +240,9 @@ def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
         for j, c in enumerate(names):
             cols[c] = xi[:, j]
         cols.update(alpha_f_hat=trace.slip[:, 0], alpha_r_hat=trace.slip[:, 1], Fyf_hat=trace.force[:, 0],
-                    Fyr_hat=trace.force[:, 1], vy_hat=trace.state[:, 0], yaw_rate_hat=trace.state[:, 1])  # fmt: skip
+                    Fyr_hat=trace.force[:, 1], vy_hat=trace.state[:, StateIndex.VY], yaw_rate_hat=trace.state[:, StateIndex.R])  # fmt: skip
         if trace.std.size:
-            cols.update(vy_std=trace.std[:, 0], yaw_rate_std=trace.std[:, 1])
+            cols.update(vy_std=trace.std[:, StateIndex.VY], yaw_rate_std=trace.std[:, StateIndex.R])
         cols.update(health=online.health.astype(float), alpha_f_online=online.slip[:, 0], alpha_r_online=online.slip[:, 1])
         write_table(out / "estimates.csv", cols)
         grid = np.radians(np.linspace(-8, 8, 161))
