@@ -492,11 +492,11 @@ class JointUKF:
     # -- learned tire ---------------------------------------------------------------------
     def cornering_stiffness(self) -> tuple[float, float]:
         """Current per-tire cornering stiffness estimate (front, rear) [N/rad]."""
-        return float(self.vehicle.Cf * math.exp(self.x_[4])), float(self.vehicle.Cr * math.exp(self.x_[5]))
+        return float(self.vehicle.Cf * math.exp(self.x_[X_LOG_CF])), float(self.vehicle.Cr * math.exp(self.x_[X_LOG_CR]))
 
     def peak_friction(self) -> tuple[float, float]:
         """Current peak-friction estimate (front, rear) [-]."""
-        return float(math.exp(self.x_[6])), float(math.exp(self.x_[7]))
+        return float(math.exp(self.x_[X_LOG_MU_F])), float(math.exp(self.x_[X_LOG_MU_R]))
 
     def axle_force(self, alpha: ArrayLike, axle: str) -> NDArray:
         """Total axle lateral force [N] of the learned curve at slip(s) ``alpha`` [rad]; ``axle`` in {"front", "rear"}."""
