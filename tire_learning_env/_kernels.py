@@ -62,6 +62,9 @@ CAMC_NOISE, CAMC_HEAD, CAMC_COUNT = range(3)
 # driver parameter vector: gain, lookahead time, integral gain, max steering, L, K_us, lr, lf m/(2 Cr L)
 DRV_GAIN, DRV_TLA, DRV_KI, DRV_MAX, DRV_L, DRV_KUS, DRV_LR, DRV_E2COEF = range(8)
 N_DRIVER = 8
+# driver state vector (``dstate``): the integral of e1 [m s]
+DS_INTEGRAL = 0
+N_DRIVER_STATE = 1
 #: Layout of the steering a_y guard (:func:`guard_steering`): limit [m/s^2] (inf: off), lowest and
 #: highest steering-to-a_y gain [m/s^2/rad], the last IMU a_y [m/s^2].
 GUARD_LIMIT, GUARD_GAIN_LOW, GUARD_GAIN_HIGH, GUARD_AY = range(4)
@@ -239,14 +242,14 @@ def camera_tick(t, e1, e2, cam, cstate, counters, pending, noise, drop):
 
 @njit(cache=True)
 def driver_steer(e1, e2, kappa, vx, dt, drv, dstate):
-    """Lane-keeping steering [rad] (see :mod:`tire_learning_env.driver`); ``dstate[0]`` is the integral."""
+    """Lane-keeping steering [rad] (see :mod:`tire_learning_env.driver`); ``dstate[DS_INTEGRAL]`` is the integral."""
     L = drv[DRV_L]
     e2_per_kappa = -drv[DRV_LR] + drv[DRV_E2COEF] * vx * vx
     g_ff = L + drv[DRV_KUS] * vx * vx + drv[DRV_GAIN] * vx * drv[DRV_TLA] * e2_per_kappa
     fb = 0.0
     if e1 == e1 and e2 == e2:
-        dstate[0] += e1 * dt
-        fb = drv[DRV_GAIN] * (e1 + vx * drv[DRV_TLA] * e2) + drv[DRV_KI] * dstate[0]
+        dstate[DS_INTEGRAL] += e1 * dt
+        fb = drv[DRV_GAIN] * (e1 + vx * drv[DRV_TLA] * e2) + drv[DRV_KI] * dstate[DS_INTEGRAL]
     delta = g_ff * kappa - fb
     m = drv[DRV_MAX]
     if delta > m:

@@ -15,7 +15,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._kernels import GUARD_AY, GUARD_GAIN_HIGH, GUARD_GAIN_LOW, GUARD_LIMIT, N_GUARD, driver_steer
+from ._kernels import (
+    DS_INTEGRAL,
+    GUARD_AY,
+    GUARD_GAIN_HIGH,
+    GUARD_GAIN_LOW,
+    GUARD_LIMIT,
+    N_DRIVER_STATE,
+    N_GUARD,
+    driver_steer,
+)
 from .params import DriverParams, VehicleParams
 
 __all__ = ["LaneKeepingDriver", "driver_vector"]
@@ -53,13 +62,13 @@ class LaneKeepingDriver:
         self.params = params
         self.vehicle = vehicle
         self.param_vec = driver_vector(params, vehicle)
-        self.state = np.zeros(1)
+        self.state = np.zeros(N_DRIVER_STATE)
         self.guard = np.zeros(N_GUARD)
         self.guard[GUARD_LIMIT] = np.inf
 
     def reset(self) -> None:
         """Zero the integral state and the a_y guard's last IMU reading."""
-        self.state[0] = 0.0
+        self.state[DS_INTEGRAL] = 0.0
         self.guard[GUARD_AY] = 0.0
 
     def set_ay_guard(self, limit: float, gain_low: float, gain_high: float) -> None:
@@ -101,4 +110,4 @@ class LaneKeepingDriver:
 
     @property
     def integral(self) -> float:
-        return float(self.state[0])
+        return float(self.state[DS_INTEGRAL])
