@@ -298,7 +298,7 @@ class MultiBodyPlant:
         x[K.S_OMEGA_RR] = (vx - 0.5 * p.T_r * r) / p.R_w
         f = np.zeros(K.N_STATE)
         K.plant_rhs(x, 0.0, vx, 0.0, self.par, self.ty, f, self._aux)
-        x[K.S_LAG_LF : K.S_LAG_RR + 1] = self._aux[K.AUX_ALPHA : K.AUX_ALPHA + 4]
+        x[K.S_LAG_LF : K.S_LAG_RR + 1] = self._aux[K.AUX_ALPHA : K.AUX_ALPHA + K.N_WHEELS]
         self.x[:] = x
         self.s, e1, e1d, e2, e2d = K.path_errors(x[K.S_X], x[K.S_Y], x[K.S_PSI], vx, vy, r, 0.0, *self.path.arrays())
         self.state[:] = (e1, e1d, e2, e2d)
@@ -455,26 +455,26 @@ class MultiBodyPlant:
         return self._wheels(self._aux, self._lag_start)
 
     def _wheels(self, aux: NDArray, lag: NDArray) -> dict[str, NDArray]:
-        kin = -aux[..., K.AUX_ALPHA : K.AUX_ALPHA + 4]
+        kin = -aux[..., K.AUX_ALPHA : K.AUX_ALPHA + K.N_WHEELS]
         return {
             "alpha_kinematic": kin,
             "alpha_lagged": -lag if self.config.relaxation_length > 0 else kin,
-            "fy": aux[..., K.AUX_FY : K.AUX_FY + 4],
-            "fx": aux[..., K.AUX_FX : K.AUX_FX + 4],
-            "fz": aux[..., K.AUX_FZ : K.AUX_FZ + 4],
-            "kappa": aux[..., K.AUX_KAPPA : K.AUX_KAPPA + 4],
-            "camber": aux[..., K.AUX_GAMMA : K.AUX_GAMMA + 4],
+            "fy": aux[..., K.AUX_FY : K.AUX_FY + K.N_WHEELS],
+            "fx": aux[..., K.AUX_FX : K.AUX_FX + K.N_WHEELS],
+            "fz": aux[..., K.AUX_FZ : K.AUX_FZ + K.N_WHEELS],
+            "kappa": aux[..., K.AUX_KAPPA : K.AUX_KAPPA + K.N_WHEELS],
+            "camber": aux[..., K.AUX_GAMMA : K.AUX_GAMMA + K.N_WHEELS],
         }
 
     def history(self) -> dict[str, NDArray]:
         """Per-tick history (``record=True``): ``t``, ``s``, the :meth:`wheel_output` keys (n, 4), axle truth."""
         if not self.record:
             raise RuntimeError("construct the plant with record=True to keep a history")
-        h = np.array(self._history).reshape(-1, 2 + K.N_AUX + K.N_TRUTH + 4)
+        h = np.array(self._history).reshape(-1, 2 + K.N_AUX + K.N_TRUTH + K.N_WHEELS)
         aux = h[:, 2 : 2 + K.N_AUX]
         tr = h[:, 2 + K.N_AUX : 2 + K.N_AUX + K.N_TRUTH]
         out = {"t": h[:, 0], "s": h[:, 1]}
-        out.update(self._wheels(aux, h[:, -4:]))
+        out.update(self._wheels(aux, h[:, -K.N_WHEELS:]))
         out.update(
             alpha_f=tr[:, K.TR_ALPHA_F], alpha_r=tr[:, K.TR_ALPHA_R], Fyf=tr[:, K.TR_FYF], Fyr=tr[:, K.TR_FYR],
             vx=tr[:, K.TR_VX], delta=tr[:, K.TR_DELTA],
