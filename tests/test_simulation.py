@@ -83,6 +83,7 @@ def test_speed_profile_runs_keep_their_midpoint_lookup():
     differ by that term only, so the logs agree closely but not to the bit."""
     import math
 
+    from tire_learning_env import _kernels as K
     from tire_learning_env.simulation import advance_ticks_python
 
     v = VehicleParams()
@@ -91,11 +92,11 @@ def test_speed_profile_runs_keep_their_midpoint_lookup():
     for factor in (0.0, 0.125):
         sim = Simulator(BicyclePlant(v, *axle_tires(v)), make_road("sine"), CameraParams(), DriverParams())
         sim.reset(np.random.default_rng(0))
-        out = np.empty((3000, 20))
+        out = np.empty((3000, K.N_LOG))
         advance_ticks_python(3000, sim.dt, 0, sim.plant, 0.0, 30.0, 1.5, sim.table.lookup, sim.camera, sim.driver,
                              0.0, math.nan, 0.0, out, speed_profile=profile, midpoint_ax_factor=factor)  # fmt: skip
         logs[factor] = out
     assert not np.array_equal(logs[0.0], logs[0.125], equal_nan=True)
     np.testing.assert_allclose(logs[0.0], logs[0.125], rtol=1e-6, atol=1e-5)  # forces [N] of order 1e3
     a = simulate("sine", 3.0, speed_profile=profile)
-    np.testing.assert_array_equal(a.truth["true_state"], logs[0.0][:, 11:15])
+    np.testing.assert_array_equal(a.truth["true_state"], logs[0.0][:, K.LOG_TRUE_E1 : K.LOG_TRUE_E2_DOT + 1])
