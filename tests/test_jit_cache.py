@@ -63,11 +63,29 @@ print(json.dumps([float(nu[0]), float(nu[1])]))
 """
 
 
-def _probe(root: Path) -> list[float]:
+# The multi-body model's right-hand side (``_mb_kernels``), which calls the PAC2002 tire (``_pac2002``).
+PROBE_MB = """
+import json
+
+import numpy as np
+from tire_learning_env.high_order import _mb_kernels as K
+from tire_learning_env.high_order.params import HighOrderConfig, MultiBodyParams
+from tire_learning_env.high_order.plant import parameter_vector, static_state, tire_vector
+
+params = MultiBodyParams.from_commonroad(2)
+x = static_state(params, 20.0)
+x[K.S_VY], x[K.S_R] = 0.3, 0.1
+f, aux = np.zeros(K.N_STATE), np.zeros(K.N_AUX)
+K.mb_rhs(x, 0.0, 0.0, parameter_vector(params, HighOrderConfig()), tire_vector(params.tire), False, f, aux)
+print(json.dumps([float(f[K.S_VY]), float(aux[K.AUX_FY + K.W_LF])]))
+"""
+
+
+def _probe(root: Path, probe: str = PROBE) -> list[float]:
     env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS="1")
     env.pop("NUMBA_CACHE_DIR", None)  # the copy's own __pycache__ (numba's default in a writable tree)
     env.pop("NUMBA_DISABLE_JIT", None)
-    done = subprocess.run([sys.executable, "-c", PROBE], env=env, cwd=root, capture_output=True, text=True, timeout=900)
+    done = subprocess.run([sys.executable, "-c", probe], env=env, cwd=root, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -103,6 +121,34 @@ def test_an_edited_callee_in_another_file_is_recompiled(tmp_path, guard):
     assert edited != first, "the edited callee did not reach the cached caller (stale machine code ran)"
     _edit(callee, SLIP_EDITED, SLIP)  # the edit is what ran: undoing it gives the first result back
     assert _probe(root) == first
+
+
+PAC_LATERAL = "F_y = D_y * math.sin(_mf_angle(alpha_y, B_y, C_y, E_y)) + S_vy"
+PAC_LATERAL_EDITED = "F_y = 2.0 * D_y * math.sin(_mf_angle(alpha_y, B_y, C_y, E_y)) + S_vy"  # peak doubled
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("guard", [True, False], ids=["family stamp", "numba alone (the hazard)"])
+def test_an_edited_tire_function_reaches_the_cached_multi_body_model(tmp_path, guard):
+    """The same for the multi-body family: an edit to ``_pac2002.pac_lateral`` reaches ``_mb_kernels.mb_rhs``."""
+    root = tmp_path / "copy"
+    shutil.copytree(PACKAGE, root / "tire_learning_env", ignore=shutil.ignore_patterns("__pycache__"))
+    if not guard:
+        _edit(root / "tire_learning_env" / "_jit_cache.py", "    digest = family_digest(files)\n",
+              "    return 0\n    digest = family_digest(files)\n")
+    callee = root / "tire_learning_env" / "high_order" / "_pac2002.py"
+    first = _probe(root, PROBE_MB)
+    assert list((root / "tire_learning_env" / "high_order" / "__pycache__").glob("_mb_kernels.mb_rhs-*.nbi")), \
+        "mb_rhs was not cached: the test would not exercise the cache"
+    assert _probe(root, PROBE_MB) == first
+    _edit(callee, PAC_LATERAL, PAC_LATERAL_EDITED)
+    edited = _probe(root, PROBE_MB)
+    if not guard:
+        assert edited == first, "numba now follows edits across files by itself: the family stamp may be dropped"
+        return
+    assert edited != first, "the edited tire function did not reach the cached model (stale machine code ran)"
+    _edit(callee, PAC_LATERAL_EDITED, PAC_LATERAL)
+    assert _probe(root, PROBE_MB) == first
 
 
 @pytest.mark.parametrize("family", sorted(FAMILIES))
