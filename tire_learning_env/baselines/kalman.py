@@ -36,13 +36,15 @@ sample, record, predict to the next row with the row's inputs), returning an
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from ..observer._kernel import V_FLOOR, slip_angles
+from .._jit_cache import key_on_family
+from ..observer._kernel import KERNEL_FAMILY, V_FLOOR, slip_angles
 from ..observer.model import check_sensor_columns
 from ..observer.trace import EstimateTrace
 from ..params import ParameterError, VehicleParams
@@ -344,3 +346,9 @@ class LinearKalmanFilter:
 
 #: former name (``tire_learning_env.imu.LinearKalmanBaseline``)
 LinearKalmanBaseline = LinearKalmanFilter
+
+
+#: the observer's compiled family plus this file: an edit to the slip angles invalidates this module's numba cache
+#: (:func:`tire_learning_env._jit_cache.key_on_family`)
+KALMAN_FAMILY = (*KERNEL_FAMILY, Path(__file__))
+key_on_family(globals(), KALMAN_FAMILY)

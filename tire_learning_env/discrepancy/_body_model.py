@@ -31,10 +31,13 @@ less than proportional load sensitivity shows as a smaller ``h``.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit, prange
 
+from .. import _kernels
+from .._jit_cache import key_on_family
 from .._kernels import V_IZ, V_LF, V_LR, V_M, tire_force
 from ._model import (
     CH_YAW,
@@ -339,3 +342,9 @@ def body_window_residuals(
         for a in range(N_STATE):
             x0_out[w, a] = x[a]
         store_residuals(resid, meas_val, meas_w, base, m0, m1, ok)
+
+
+#: the files whose compiled code (and frozen constants) this module's compiled functions reach: an edit to any
+#: of them invalidates this module's numba cache (:func:`tire_learning_env._jit_cache.key_on_family`)
+BODY_MODEL_FAMILY = (Path(_kernels.__file__), Path(__file__).with_name("_model.py"), Path(__file__))
+key_on_family(globals(), BODY_MODEL_FAMILY)

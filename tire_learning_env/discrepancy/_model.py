@@ -21,10 +21,13 @@ Measurement channels (``CH_*``): camera ``e1`` [m] and ``e2`` [rad] (a frame del
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit, prange
 
+from .. import _kernels
+from .._jit_cache import key_on_family
 from .._kernels import V_HCG, V_IZ, V_LF, V_LR, V_M, V_TRACK, tire_force
 
 # theta layout: one entry per physical parameter of the effect library
@@ -509,3 +512,9 @@ def steering_sensitivity(
             for j in range(ra, rb):
                 dl[j] = delta[j]
             fd_column(out, b - blk_ptr[w], meas_w, pert, base, m0, m1, h)
+
+
+#: the files whose compiled code (and frozen constants) this module's compiled functions reach: an edit to any
+#: of them invalidates this module's numba cache (:func:`tire_learning_env._jit_cache.key_on_family`)
+MODEL_FAMILY = (Path(_kernels.__file__), Path(__file__))
+key_on_family(globals(), MODEL_FAMILY)
