@@ -353,10 +353,9 @@ def estimate(
         # a camera log whose rows lie between its frames: the midpoint of the two holds (a simulator's rows at its
         # step hold the steering; rows decimated from a faster drive ramp); rows that are the frames themselves
         # come from a drive faster than its frames, so the ramp is kept (sensitivity.steering_hold_sensitivity)
-        frames_on_rows = float(np.mean(np.isfinite(rows["e1"]))) if model.uses_camera else 1.0
-        hold_info = steering_hold_sensitivity(obs, rows, fit, decide_by_cost=model.uses_imu,
-                                              midpoint=(not model.uses_imu and config.steering_hold is None
-                                                        and frames_on_rows < 0.6))  # fmt: skip
+        midpoint = (model.name == "camera" and config.steering_hold is None
+                    and float(np.mean(np.isfinite(rows["e1"]))) < 0.6)  # frames on fewer than 60 % of the rows
+        hold_info = steering_hold_sensitivity(obs, rows, fit, decide_by_cost=model.uses_imu, midpoint=midpoint)
         if hold_info.get("switch"):
             obs.steering_hold = hold_info["other"]
             frac = fit.force_error / (0.5 * vehicle.m * 9.81)

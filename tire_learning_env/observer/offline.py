@@ -124,8 +124,9 @@ class OfflineFit:
         if self.scores is None or self.scores.shape[0] < 8:
             return model + self.prior_sensitivity(g)
         u = np.empty((self.scores.shape[0], Ainv_g.shape[1]))  # (rows, n): each direction's score series
-        for s in range(0, len(u), 32768):  # the single-precision scores converted a block at a time
-            u[s : s + 32768] = self.scores[s : s + 32768].astype(float) @ Ainv_g
+        block = 32768  # the single-precision scores converted a block of rows at a time
+        for r in range(0, len(u), block):
+            u[r : r + block] = self.scores[r : r + block].astype(float) @ Ainv_g
         sandwich = newey_west_variance(u)
         return prior_part + np.maximum(sandwich, data_part) + self.prior_sensitivity(g)
 

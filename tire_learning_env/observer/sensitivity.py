@@ -79,8 +79,9 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
     to 100 Hz read +0.11 / +0.54 % ramped and +1.87 / +3.09 % held. The samples cannot tell the
     two apart: in both, the steering change at a frame's row is the reaction to that frame
     (R^2 0.47). At a 20 Hz camera's frames only, from the same 1 kHz drive, the holds differ by
-    10-16 % and the ramp is the near one (+1.2 / +1.8 %; the midpoint +5.4 / +8.6 %). ``alternative_iter`` Gauss-Newton steps (default ``2 * max_iter`` with
-    ``midpoint``, else ``max_iter``) carry the other hold's refit from the window's baseline.
+    10-16 % and the ramp is the near one (+1.2 / +1.8 %; the midpoint +5.4 / +8.6 %).
+    ``alternative_iter`` Gauss-Newton steps (default ``2 * max_iter`` with ``midpoint``, else
+    ``max_iter``) carry the other hold's refit from the window's baseline.
     """
     t = np.asarray(sensors["t"], dtype=float)
     period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
