@@ -31,6 +31,7 @@ less than proportional load sensitivity shows as a smaller ``h``.
 from __future__ import annotations
 
 import math
+from enum import IntEnum
 from pathlib import Path
 
 import numpy as np
@@ -75,12 +76,20 @@ from ._model import (
     window_buffers,
 )
 
+
+class BodyState(IntEnum):
+    """Components of the body-frame state ``x`` (a window's initial state ``x0``, its steps ``dx``)."""
+
+    VY = 0  # lateral velocity at the CG [m/s]
+    R = 1  # yaw rate [rad/s]
+
+
+N_STATE = len(BodyState)
 # per-row outputs of simulate_body_rows: columns 4..11 mean what they mean in _model (OUT_*)
 OUT_VY = 0  # lateral velocity [m/s]
 OUT_R = 1  # yaw rate (state, without the sensor bias) [rad/s]
 OUT_VYD = 2  # lateral velocity derivative [m/s^2]
 OUT_RD = 3  # yaw acceleration [rad/s^2]
-N_STATE = 2
 
 _G = 9.81
 #: reference road-wheel angle of the steering-ratio nonlinearity [rad]
@@ -197,7 +206,7 @@ def simulate_body_rows(x0, j0, j1, t, delta, dslope, vx, ax, veh, tf, tr, tabf, 
     ``OUT_YAW`` / ``OUT_AY`` the predicted *measurements*). Lag states start at the
     kinematic slip. Returns False if the state became non-finite (later rows NaN).
     """
-    vy, r = x0[0], x0[1]
+    vy, r = x0[BodyState.VY], x0[BodyState.R]
     sigma = th[TH_RELAX]
     tau = th[TH_STEER_DELAY]
     lf, lr = veh[V_LF], veh[V_LR]
@@ -301,8 +310,8 @@ def body_window_residuals(
         trial = np.empty(nm)
         vlim = VY_LIMIT * vx[j0]
         x = x0_guess[w].copy()
-        x[0] = min(max(x[0], -vlim), vlim)
-        x[1] = min(max(x[1], -R_LIMIT), R_LIMIT)
+        x[BodyState.VY] = min(max(x[BodyState.VY], -vlim), vlim)
+        x[BodyState.R] = min(max(x[BodyState.R], -R_LIMIT), R_LIMIT)
         ok = simulate_body_rows(x, j0, j1, t, delta, dslope, vx, ax, veh, tf, tr, tabf, tabr, th, h_max, traj)
         predict_body_measurements(traj, j0, meas_row, meas_chan, m0, m1, base)
         cost = _weighted_cost(base, meas_val, meas_w, m0, m1) if ok else np.inf
@@ -323,8 +332,8 @@ def body_window_residuals(
             shrink = step_shrink(dx, max_step)
             accepted = False
             for _ in range(5):
-                xt[0] = min(max(x[0] + shrink * dx[0], -vlim), vlim)
-                xt[1] = min(max(x[1] + shrink * dx[1], -R_LIMIT), R_LIMIT)
+                xt[BodyState.VY] = min(max(x[BodyState.VY] + shrink * dx[BodyState.VY], -vlim), vlim)
+                xt[BodyState.R] = min(max(x[BodyState.R] + shrink * dx[BodyState.R], -R_LIMIT), R_LIMIT)
                 good = simulate_body_rows(xt, j0, j1, t, delta, dslope, vx, ax, veh, tf, tr, tabf, tabr, th, h_max, traj)
                 if good:
                     predict_body_measurements(traj, j0, meas_row, meas_chan, m0, m1, trial)
@@ -335,7 +344,7 @@ def body_window_residuals(
                 shrink *= 0.5
             if not accepted:
                 break  # no descent along the Gauss-Newton direction: x is a local minimum
-            x[0], x[1] = xt[0], xt[1]
+            x[BodyState.VY], x[BodyState.R] = xt[BodyState.VY], xt[BodyState.R]
             cost = ct
             for mi in range(nm):
                 base[mi] = trial[mi]
