@@ -36,6 +36,7 @@ sample, record, predict to the next row with the row's inputs), returning an
 from __future__ import annotations
 
 import math
+from enum import IntEnum
 from pathlib import Path
 from typing import Mapping
 
@@ -44,15 +45,24 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from .._jit_cache import key_on_family
-from ..observer._kernel import KERNEL_FAMILY, V_FLOOR, slip_angles
-from ..observer.model import check_sensor_columns
+from ..observer._kernel import CH_AY, CH_R, KERNEL_FAMILY, N_CHANNELS, V_FLOOR, slip_angles
+from ..observer.model import StateIndex, check_sensor_columns
 from ..observer.trace import EstimateTrace
 from ..params import ParameterError, VehicleParams
 
 __all__ = ["LinearKalmanFilter", "LinearKalmanBaseline"]
 
-# kernel state vector: beta, r, p00, p01, p11
-_NS = 5
+
+
+class KalmanState(IntEnum):
+    """Entries of the kernel state vector ``s``: the filter state and its covariance's upper triangle."""
+
+    BETA = 0  # sideslip [rad]
+    R = 1  # yaw rate [rad/s]
+    P_BETA = 2  # variance of beta [rad^2]
+    P_BETA_R = 3  # covariance of beta and r [rad^2/s]
+    P_R = 4  # variance of r [rad^2/s^2]
+
 
 
 @njit(cache=True)
@@ -67,17 +77,17 @@ def _kf_predict(s, dt, delta, vx, m, Iz, lf, lr, cf, cr, q):
     a11 = 1.0 - dt * (lf * lf * cf + lr * lr * cr) / (Iz * v)
     b0 = dt * cf / (m * v)
     b1 = dt * lf * cf / Iz
-    x0, x1 = s[0], s[1]
-    p00, p01, p11 = s[2], s[3], s[4]
-    s[0] = a00 * x0 + a01 * x1 + b0 * delta
-    s[1] = a10 * x0 + a11 * x1 + b1 * delta
+    x0, x1 = s[KalmanState.BETA], s[KalmanState.R]
+    p00, p01, p11 = s[KalmanState.P_BETA], s[KalmanState.P_BETA_R], s[KalmanState.P_R]
+    s[KalmanState.BETA] = a00 * x0 + a01 * x1 + b0 * delta
+    s[KalmanState.R] = a10 * x0 + a11 * x1 + b1 * delta
     t00 = a00 * p00 + a01 * p01
     t01 = a00 * p01 + a01 * p11
     t10 = a10 * p00 + a11 * p01
     t11 = a10 * p01 + a11 * p11
-    s[2] = t00 * a00 + t01 * a01 + q * b0 * b0
-    s[3] = t00 * a10 + t01 * a11 + q * b0 * b1
-    s[4] = t10 * a10 + t11 * a11 + q * b1 * b1
+    s[KalmanState.P_BETA] = t00 * a00 + t01 * a01 + q * b0 * b0
+    s[KalmanState.P_BETA_R] = t00 * a10 + t01 * a11 + q * b0 * b1
+    s[KalmanState.P_R] = t10 * a10 + t11 * a11 + q * b1 * b1
 
 
 @njit(cache=True)
@@ -85,8 +95,8 @@ def _kf_update(s, ay, yr, delta, vx, m, lf, lr, cf, cr, r_ay, r_r, nu):
     """Correct with ``a_y`` [m/s^2] and ``r`` [rad/s] (NaN: not measured); innovations into
     ``nu[0:2]``, returns ``(nis, dof)``."""
     v = vx if vx > 1.0 else 1.0
-    x0, x1 = s[0], s[1]
-    p00, p01, p11 = s[2], s[3], s[4]
+    x0, x1 = s[KalmanState.BETA], s[KalmanState.R]
+    p00, p01, p11 = s[KalmanState.P_BETA], s[KalmanState.P_BETA_R], s[KalmanState.P_R]
     c00 = -(cf + cr) / m
     c01 = -(lf * cf - lr * cr) / (m * v)
     have_ay = ay == ay
@@ -135,24 +145,25 @@ def _kf_update(s, ay, yr, delta, vx, m, lf, lr, cf, cr, r_ay, r_r, nu):
         nis = y1 * y1 / s11
         dof = 1
         nu[1] = y1
-    s[0] = x0 + k00 * y0 + k01 * y1
-    s[1] = x1 + k10 * y0 + k11 * y1
+    s[KalmanState.BETA] = x0 + k00 * y0 + k01 * y1
+    s[KalmanState.R] = x1 + k10 * y0 + k11 * y1
     # P = (I - K C) P with C = [[c00, c01], [0, 1]]
     m00 = 1.0 - k00 * c00
     m01 = -k00 * c01 - k01
     m10 = -k10 * c00
     m11 = 1.0 - k10 * c01 - k11
-    s[2] = m00 * p00 + m01 * p01
-    s[3] = m00 * p01 + m01 * p11
-    s[4] = m10 * p01 + m11 * p11
+    s[KalmanState.P_BETA] = m00 * p00 + m01 * p01
+    s[KalmanState.P_BETA_R] = m00 * p01 + m01 * p11
+    s[KalmanState.P_R] = m10 * p01 + m11 * p11
     return nis, dof
 
 
 @njit(cache=True)
 def _kf_rows(t, delta, vx, ay, yr, prm, s, u_prev, t_now, dt_last, predict_last, out_x, out_p, out_nu, out_nis, out_slip):
     """Per row: predict from ``t_now`` to the row (inputs of the previous row held), correct,
-    record (slip angles by eq. 13 with ``vy = vx tan(beta)``); then predict ``dt_last`` past the
-    last row. Returns the time reached."""
+    record (slip angles by eq. 13 with ``vy = vx tan(beta)``; ``out_x`` holds ``beta``, ``r`` and
+    ``out_p`` their variances, in the columns ``KalmanState.BETA``, ``KalmanState.R``); then predict
+    ``dt_last`` past the last row. Returns the time reached."""
     m, Iz, lf, lr, cf, cr, q, r_ay, r_r = prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8]
     n = t.shape[0]
     nu = np.empty(2)
@@ -163,15 +174,16 @@ def _kf_rows(t, delta, vx, ay, yr, prm, s, u_prev, t_now, dt_last, predict_last,
             _kf_predict(s, t[0] - t_now, u_prev[0], u_prev[1], m, Iz, lf, lr, cf, cr, q)
         t_now = t[i]
         nis, dof = _kf_update(s, ay[i], yr[i], delta[i], vx[i], m, lf, lr, cf, cr, r_ay, r_r, nu)
-        out_x[i, 0] = s[0]
-        out_x[i, 1] = s[1]
-        out_p[i, 0] = s[2]
-        out_p[i, 1] = s[4]
+        out_x[i, KalmanState.BETA] = s[KalmanState.BETA]
+        out_x[i, KalmanState.R] = s[KalmanState.R]
+        out_p[i, KalmanState.BETA] = s[KalmanState.P_BETA]
+        out_p[i, KalmanState.R] = s[KalmanState.P_R]
         out_nu[i, 0] = nu[0]
         out_nu[i, 1] = nu[1]
         out_nis[i] = nis if dof > 0 else np.nan
         v = vx[i] if vx[i] > V_FLOOR else V_FLOOR
-        out_slip[i, 0], out_slip[i, 1] = slip_angles(v * math.tan(s[0]), s[1], delta[i], vx[i], lf, lr)
+        beta, r = s[KalmanState.BETA], s[KalmanState.R]
+        out_slip[i, 0], out_slip[i, 1] = slip_angles(v * math.tan(beta), r, delta[i], vx[i], lf, lr)
     if n > 0:
         u_prev[0] = delta[n - 1]
         u_prev[1] = vx[n - 1]
@@ -234,8 +246,10 @@ class LinearKalmanFilter:
         if weights is not None and np.asarray(weights).size:
             raise ParameterError("the linear Kalman filter has no weights")
         x = np.zeros(2) if state is None else np.asarray(state, dtype=float).reshape(2)
-        beta = math.atan2(float(x[0]), max(self.vehicle.vx, V_FLOOR))
-        self._s = np.array([beta, float(x[1]), self.initial_var, 0.0, self.initial_var])
+        self._s = np.zeros(len(KalmanState))
+        self._s[KalmanState.BETA] = math.atan2(float(x[StateIndex.VY]), max(self.vehicle.vx, V_FLOOR))
+        self._s[KalmanState.R] = x[StateIndex.R]
+        self._s[KalmanState.P_BETA] = self._s[KalmanState.P_R] = self.initial_var
         self._u = np.array([0.0, self.vehicle.vx])  # inputs held since the last row (delta, vx)
         self._started = False
         self.t = 0.0
@@ -245,17 +259,19 @@ class LinearKalmanFilter:
     def state(self) -> NDArray:
         """Current ``[vy, r]`` (``vy = vx tan(beta)`` at the speed of the last input; the vehicle's
         nominal speed before any)."""
-        return np.array([max(float(self._u[1]), V_FLOOR) * math.tan(self._s[0]), self._s[1]])
+        beta, r = self._s[KalmanState.BETA], self._s[KalmanState.R]
+        return np.array([max(float(self._u[1]), V_FLOOR) * math.tan(beta), r])  # in StateIndex order (VY, R)
 
     @property
     def beta(self) -> float:
         """Current sideslip estimate [rad]."""
-        return float(self._s[0])
+        return float(self._s[KalmanState.BETA])
 
     @property
     def covariance(self) -> NDArray:
         """Current covariance of ``(beta, r)``."""
-        p00, p01, p11 = self._s[2:]
+        s = self._s
+        p00, p01, p11 = s[KalmanState.P_BETA], s[KalmanState.P_BETA_R], s[KalmanState.P_R]
         return np.array([[p00, p01], [p01, p11]])
 
     # -- verbs ------------------------------------------------------------------------------------
@@ -281,7 +297,7 @@ class LinearKalmanFilter:
         else:
             zz = np.asarray(z, dtype=float).reshape(-1)
             if zz.size == 4:
-                ay, yr = zz[2], zz[3]
+                ay, yr = zz[CH_AY], zz[CH_R]
             elif zz.size == 2:
                 ay, yr = zz
             else:
@@ -320,13 +336,13 @@ class LinearKalmanFilter:
     def _trace(self, t, vx, out_x, out_p, out_nu, out_nis, slip) -> EstimateTrace:
         n = len(t)
         vxf = np.maximum(vx, V_FLOOR)
-        beta, r = out_x[:, 0], out_x[:, 1]
+        beta, r = out_x[:, KalmanState.BETA], out_x[:, KalmanState.R]
         vy = vxf * np.tan(beta)
         force = slip * np.array(self.axle_stiffness)
-        std = np.column_stack([vxf * np.sqrt(np.maximum(out_p[:, 0], 0.0)) / np.cos(beta) ** 2,
-                               np.sqrt(np.maximum(out_p[:, 1], 0.0))])  # fmt: skip
-        nu = np.full((n, 4), np.nan)
-        nu[:, 2:] = out_nu
+        std = np.column_stack([vxf * np.sqrt(np.maximum(out_p[:, KalmanState.BETA], 0.0)) / np.cos(beta) ** 2,
+                               np.sqrt(np.maximum(out_p[:, KalmanState.R], 0.0))])  # fmt: skip
+        nu = np.full((n, N_CHANNELS), np.nan)
+        nu[:, [CH_AY, CH_R]] = out_nu
         return EstimateTrace(
             t.copy(), np.column_stack([vy, r]), slip, force, np.zeros((n, 2)), np.zeros((n, 0)), std,
             np.zeros(n, dtype=np.int8), nu, out_nis, vx.copy(), np.zeros(n), ("vy", "yaw_rate"),
