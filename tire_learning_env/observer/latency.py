@@ -3,12 +3,15 @@ latencies (step 4 of :func:`.estimator.estimate`; re-exported by :mod:`.estimato
 
 from __future__ import annotations
 
+import copy
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 from numpy.typing import NDArray
 
 from .config import ObserverConfig
 from .neuro_adaptive import NeuroAdaptiveObserver
-from .offline import calibrate_force_error, pem_cost
+from .offline import calibrate_force_error, pass_threads, pem_cost
 
 
 def _profile_window(t: NDArray, delta: NDArray, max_s: float = 120.0) -> slice:
@@ -48,18 +51,26 @@ def _estimate_latency(obs: NeuroAdaptiveObserver, rows: dict, config: ObserverCo
     costs = {}
     updates = [0]
 
+    def profile(d):  # on a copy of the observer (its own state): the grid's candidates run on threads
+        ob = copy.copy(obs)
+        ob.latency = d
+        ob.reset(weights=w0)
+        return pem_cost(ob, sub, w0)
+
+    def keep(d, J, n):
+        costs[d] = J / max(n, 1)
+        updates[0] = max(updates[0], int(n))
+
     def cost(d):
         d = round(float(d), 4)
         if d not in costs:
-            obs.latency = d
-            obs.reset(weights=w0)
-            J, n = pem_cost(obs, sub, w0)
-            costs[d] = J / max(n, 1)
-            updates[0] = max(updates[0], int(n))
+            keep(d, *profile(d))
         return costs[d]
 
-    for c in cands:
-        cost(c)
+    grid = sorted({round(float(c), 4) for c in cands})
+    with ThreadPoolExecutor(max_workers=min(pass_threads(), len(grid))) as pool:
+        for d, (J, n) in zip(grid, pool.map(profile, grid)):
+            keep(d, J, n)
     ds = sorted(costs)
     j = int(np.argmin([costs[d] for d in ds]))
     best = ds[j]
