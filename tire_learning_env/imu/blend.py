@@ -70,6 +70,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from ..observer._kernel import CH_AY, CH_R
+from ..observer.model import StateIndex
 from ..observer.trace import EstimateTrace
 from ..params import ParameterError, _Params
 
@@ -397,7 +399,8 @@ def blend_traces(observer: EstimateTrace, kalman: EstimateTrace, params: BlendPa
     Parameters
     ----------
     observer, kalman : EstimateTrace
-        Over the same rows (``innovation`` columns 2, 3 = ``a_y``, ``r``; ``std`` of ``vy``).
+        Over the same rows (``innovation`` columns ``CH_AY``, ``CH_R``; ``state`` and ``std`` columns
+        ``StateIndex.VY``, ``StateIndex.R``).
     params : BlendParams, optional
     smooth : bool
         Smoothed mode probabilities (:func:`mode_probabilities`): for an observer pass that is
@@ -417,14 +420,16 @@ def blend_traces(observer: EstimateTrace, kalman: EstimateTrace, params: BlendPa
             raise ParameterError("the observer and Kalman traces must cover the same rows")
     n_obs = len(traces) - 1
     prior = np.r_[np.full(n_obs, params.prior_observer / n_obs), 1.0 - params.prior_observer]
-    mu, _ = mode_probabilities(observer.t, [tr.innovation[:, 2:4] for tr in traces], params, prior=prior, smooth=smooth)
+    imu = [CH_AY, CH_R]
+    mu, _ = mode_probabilities(observer.t, [tr.innovation[:, imu] for tr in traces], params, prior=prior, smooth=smooth)
     vx = np.maximum(observer.vx, 1e-3)
-    x = sum(mu[:, j : j + 1] * tr.state[:, :2] for j, tr in enumerate(traces))
+    vy = sum(mu[:, j] * tr.state[:, StateIndex.VY] for j, tr in enumerate(traces))
+    yaw_rate = sum(mu[:, j] * tr.state[:, StateIndex.R] for j, tr in enumerate(traces))
     beta = sum(mu[:, j] * tr.beta for j, tr in enumerate(traces))
     var = np.zeros_like(beta)
     for j, tr in enumerate(traces):
-        s = tr.std[:, 0] / vx if tr.std.size else np.zeros_like(beta)
+        s = tr.std[:, StateIndex.VY] / vx if tr.std.size else np.zeros_like(beta)
         var += mu[:, j] * (s**2 + (tr.beta - beta) ** 2)
     slip = sum(mu[:, j : j + 1] * tr.slip for j, tr in enumerate(traces))
     force = sum(mu[:, j : j + 1] * tr.force for j, tr in enumerate(traces))
-    return Blend(observer.t.copy(), x[:, 0], x[:, 1], beta, np.sqrt(var), slip, force, mu, names)
+    return Blend(observer.t.copy(), vy, yaw_rate, beta, np.sqrt(var), slip, force, mu, names)
