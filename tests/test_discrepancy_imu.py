@@ -117,19 +117,27 @@ def test_imu_library_registry():
         parse_imu_effects({"gremlins": 1.0})
 
 
-def _chi2_per_sample(hidden: dict, effects: dict | None) -> float:
-    """chi2 / n of the model with ``effects`` on a 40 s log with ``hidden`` effects (same noise, same drive)."""
+def _chi2_per_sample(hidden: dict, *effects: dict | None) -> list[float]:
+    """chi2 / n of the model with each of ``effects`` (None: the nominal model) on one 40 s log with ``hidden``
+    effects (same noise, same drive; the log is simulated once, each model built afresh)."""
     cols = simulate_hidden_imu(hidden, duration=40.0, seed=3)
     log = DrivingLog({k: cols[k] for k in ("t", "vx", "delta", "yaw_rate", "ay", "ax")}, {}, "imu", "sim")
     cfg = DiscrepancyConfig()
     data = prepare(log, cfg)
-    model = ResidualModel(data, V, *axle_tires(V, "pacejka", TIRE), cfg)
-    ev = model.best_of(theta_of(effects, "imu"), [None]) if effects else model.nominal_start()
-    # chi2 in units of the clean log's noise estimate, so that logs with different effects compare
-    return float(np.sum((ev.resid / data.meas_w) ** 2 * CLEAN_WEIGHT[data.meas_chan] ** 2) / data.n_measurements)
+    if not CLEAN_WEIGHT.any():  # the clean log's noise estimate (hidden = {} is the first call)
+        assert not hidden
+        CLEAN_WEIGHT[2:] = 1.0 / data.sigma[2:]
+    out = []
+    for eff in effects:
+        model = ResidualModel(data, V, *axle_tires(V, "pacejka", TIRE), cfg)
+        ev = model.best_of(theta_of(eff, "imu"), [None]) if eff else model.nominal_start()
+        # chi2 in units of the clean log's noise estimate, so that logs with different effects compare
+        out.append(float(np.sum((ev.resid / data.meas_w) ** 2 * CLEAN_WEIGHT[data.meas_chan] ** 2) / data.n_measurements))
+    return out
 
 
 CLEAN_WEIGHT = np.zeros(4)
+CLEAN_CHI2: list[float] = []  # the nominal model's chi2 / n on the clean drive, computed once for every case
 
 
 @pytest.mark.parametrize("name", list(CASES))
@@ -137,15 +145,11 @@ def test_truth_and_model_implement_each_effect_identically(name):
     """The compiled body-frame model with the true parameters reproduces the independently
     implemented truth to the noise level: the same chi2 as the nominal model on the same drive
     without the effect."""
-    if not CLEAN_WEIGHT.any():
-        cols = simulate_hidden_imu({}, duration=40.0, seed=3)
-        log = DrivingLog({k: cols[k] for k in ("t", "vx", "delta", "yaw_rate", "ay", "ax")}, {}, "imu", "sim")
-        data = prepare(log, DiscrepancyConfig())
-        CLEAN_WEIGHT[2:] = 1.0 / data.sigma[2:]
+    if not CLEAN_CHI2:
+        CLEAN_CHI2.extend(_chi2_per_sample({}, None))
     hidden, truth = CASES[name]
-    clean = _chi2_per_sample({}, None)
-    with_effect = _chi2_per_sample(hidden, {name: truth})
-    nominal = _chi2_per_sample(hidden, None)
+    clean = CLEAN_CHI2[0]
+    with_effect, nominal = _chi2_per_sample(hidden, {name: truth}, None)
     # 1.5 % of chi2 for the longitudinal load transfer: the model's a_x input is estimated from the log
     # (slope of vx + slow part of the noisy logged a_x), the truth uses the exact specific force
     assert with_effect == pytest.approx(clean, rel=1.5e-2 if name == "longitudinal_load_transfer" else 1e-3)
@@ -204,7 +208,9 @@ def test_two_effects_at_once_are_both_named(tmp_path):
     assert _deviation_error("ay_bias", found["ay_bias"], [0.2]) <= 0.2
 
 
-@pytest.mark.parametrize("seed", [11, 12])
+# seed 12 is slow: seed 11 keeps the property in the default run, test_clean_imu_data_gives_none_in_19_of_20_seeds
+# (slow) takes 20 more seeds
+@pytest.mark.parametrize("seed", [11, pytest.param(12, marks=pytest.mark.slow)])
 def test_clean_imu_data_gives_none(tmp_path, seed):
     res = _analyze(_log(tmp_path, {}, seed=seed))
     assert res.verdict == "none", [(k, v.get("lr")) for st in res.selection.steps for k, v in st.tried.items()]
