@@ -113,7 +113,9 @@ def test_two_effects_at_once_are_both_named(tmp_path):
     assert res.gap_ratio >= 3.0
 
 
-@pytest.mark.parametrize("seed", [11, 12, 13])
+# seed 13 (100 Hz, like 11) is slow: seed 11 keeps a 100 Hz log in the default run, seed 12 the 20 Hz one, and
+# test_clean_data_gives_none_in_19_of_20_seeds (slow) takes 20 more 100 Hz seeds
+@pytest.mark.parametrize("seed", [11, 12, pytest.param(13, marks=pytest.mark.slow)])
 def test_clean_data_gives_none(tmp_path, seed):
     res = analyze(_log(tmp_path, {}, seed=seed, rate=100.0 if seed % 2 else 20.0), progress=False)
     assert res.verdict == "none", [(k, v.get("lr")) for st in res.selection.steps for k, v in st.tried.items()]
