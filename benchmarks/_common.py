@@ -11,7 +11,10 @@ import time
 from typing import Callable
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+    # numba refuses a NUMBA_NUM_THREADS that changes once its threads run: imported into a process that
+    # already uses numba (a test), leave it as it is (a later compile there raised "Cannot set NUMBA_NUM_THREADS")
+    if not (_var == "NUMBA_NUM_THREADS" and "numba" in sys.modules):
+        os.environ.setdefault(_var, "1")
 
 
 def pin_to_one_core() -> None:

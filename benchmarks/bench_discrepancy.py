@@ -52,7 +52,8 @@ import tempfile
 import time
 from pathlib import Path
 
-os.environ.setdefault("NUMBA_NUM_THREADS", "2")  # the target is on 2 cores (before _common's default of 1)
+if "numba" not in sys.modules:  # numba refuses a thread count that changes once its threads run (a test process)
+    os.environ.setdefault("NUMBA_NUM_THREADS", "2")  # the target is on 2 cores (before _common's default of 1)
 
 from _common import emit  # noqa: E402
 
