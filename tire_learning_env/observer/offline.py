@@ -31,7 +31,10 @@ The *learned slip range* of each axle is where the curve's two-sigma band is wit
 
 from __future__ import annotations
 
+import copy
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -179,8 +182,6 @@ PIECE_OVERLAP_S = 30.0
 
 def pass_threads() -> int:
     """Threads for the pieces of a pass: ``TIRE_LEARNING_THREADS`` if set, else the usable cores."""
-    import os
-
     env = os.environ.get("TIRE_LEARNING_THREADS")
     if env:
         try:
@@ -202,8 +203,9 @@ def pass_pieces(t: NDArray, settle_s: float) -> list[tuple[int, int, int]]:
     Piece ``i`` runs rows ``start:end`` from a cold state and counts rows ``first:end``; the
     counted rows tile the log. The overlap ``first - start`` spans :data:`PIECE_OVERLAP_S` (at least
     15 settling times): the fixed-weight Kalman predictor forgets its start within a few seconds (on
-    a 30 min, 100 Hz log a Gauss-Newton step from two pieces differed from the one-piece step by
-    0.017 posterior standard deviations with a 2 s overlap, 0.0035 with 10 s, 5e-6 with 30 s).
+    a 300 s, 100 Hz lane-change log a Gauss-Newton step from two pieces differs from the one-piece
+    step by 0.09 posterior standard deviations with no overlap, 9e-4 with 2 s, 5e-8 with 5 s and
+    3e-12 with 30 s: ``python benchmarks/bench_pass_pieces.py``).
     One piece (the exact single pass) when the log is shorter than two :data:`MIN_PIECE_S`.
     """
     n = len(t)
@@ -221,6 +223,15 @@ def pass_pieces(t: NDArray, settle_s: float) -> list[tuple[int, int, int]]:
     return [(int(a), int(f), int(b)) for a, f, b in zip(starts, firsts, ends)]
 
 
+def _run_fixed(observer, rows, w, acc, accumulate_from, gate, final):
+    """The observer from ``w`` over ``rows`` with the weights held, accumulating into ``acc``
+    (``final``: also the recorded trace with the scores and the state std)."""
+    observer.reset(weights=w)
+    return observer.run(rows, mode="fixed", accumulator=acc, accumulate_from=accumulate_from, gate=gate,
+                        store_scores=final, compute_std=final, store_weights=False, kalman=True, record=final,
+                        shift_frames=not final)  # fmt: skip
+
+
 def _pass(observer, sensors, w, fit_from, gate, final=False, innovations=False):
     """One pass with the weights held and the Kalman predictor; returns the normal equations
     (with ``innovations``, also the fit's camera innovations by row, ``acc.innov``).
@@ -234,23 +245,15 @@ def _pass(observer, sensors, w, fit_from, gate, final=False, innovations=False):
     acc = K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4), np.full((n, 2), np.nan))
     pieces = [(0, 0, len(t))] if final else pass_pieces(t, observer.settle_s)
     if len(pieces) == 1:
-        observer.reset(weights=w)
-        tr = observer.run(sensors, mode="fixed", accumulator=acc, accumulate_from=fit_from, gate=gate, store_scores=final,
-                          compute_std=final, store_weights=False, kalman=True, record=final,
-                          shift_frames=not final)  # fmt: skip
-        return acc, tr
-    import copy
-    from concurrent.futures import ThreadPoolExecutor
+        return acc, _run_fixed(observer, sensors, w, acc, fit_from, gate, final)
 
     def piece(args):
         start, first, end = args
-        ob = copy.copy(observer)  # its own state (reset below); the model and gains are shared, read only
-        ob.reset(weights=w)
         part = K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4), acc.innov[start:end] if n else acc.innov)
         rows = {k: np.asarray(v)[start:end] for k, v in sensors.items()}
         counted_from = fit_from if first == 0 else max(fit_from, float(t[first]))
-        ob.run(rows, mode="fixed", accumulator=part, accumulate_from=counted_from, gate=gate, store_scores=False,
-               compute_std=False, store_weights=False, kalman=True, record=False, shift_frames=True)  # fmt: skip
+        # its own copy of the observer (reset there: its own state); the model and gains are shared, read only
+        _run_fixed(copy.copy(observer), rows, w, part, counted_from, gate, False)
         return part
 
     with ThreadPoolExecutor(max_workers=min(pass_threads(), len(pieces))) as pool:
