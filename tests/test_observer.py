@@ -376,26 +376,26 @@ def test_a_yaw_inertia_the_log_rejects_widens_the_band_to_the_truth(iz_factor, v
     assert res.verdict == band_verdict
 
 
-# ---- a long log's fixed-weight pass runs as pieces on threads (offline._pass) ---------------------
+# ---- a long log's fixed-weight pass runs as pieces on threads (passes._pass) ---------------------
 def test_a_long_pass_runs_as_pieces_whose_fit_is_the_single_pass_fit_on_any_thread_count(monkeypatch):
-    from tire_learning_env.observer import offline
+    from tire_learning_env.observer import passes
 
     log = simulate("lane_changes", 300.0, camera=CameraParams.paper_noise(rate=20.0), physics_rate=100.0, seed=3)
     s, t = log.sensors, log.sensors["t"]
     obs = build_observer(V, CameraParams.paper_noise(rate=20.0), ObserverConfig(), physics_dt=log.dt)
-    pieces = offline.pass_pieces(t, obs.settle_s)
+    pieces = passes.pass_pieces(t, obs.settle_s)
     assert len(pieces) == 2 and pieces[0][:2] == (0, 0) and pieces[-1][2] == len(t)
     for (a0, f0, e0), (a1, f1, e1) in zip(pieces, pieces[1:]):  # counted rows tile the log; each piece warms up 30 s
-        assert e0 == f1 and t[f1] - t[a1] >= offline.PIECE_OVERLAP_S - log.dt and a1 < f1
-    assert offline.pass_pieces(t[: len(t) // 2], obs.settle_s) == [(0, 0, len(t) // 2)]  # 150 s: one piece
+        assert e0 == f1 and t[f1] - t[a1] >= passes.PIECE_OVERLAP_S - log.dt and a1 < f1
+    assert passes.pass_pieces(t[: len(t) // 2], obs.settle_s) == [(0, 0, len(t) // 2)]  # 150 s: one piece
     w = np.random.default_rng(0).normal(0.0, 0.02, obs.n_weights) * obs.basis.weight_range
     fit_from = float(t[0]) + obs.settle_s
     runs = {}
     for threads in ("1", "2"):
         monkeypatch.setenv("TIRE_LEARNING_THREADS", threads)
-        runs[threads], _ = offline._pass(obs, s, w, fit_from, 25.0, innovations=True)
-    monkeypatch.setattr(offline, "pass_pieces", lambda t, settle: [(0, 0, len(t))])
-    single, _ = offline._pass(obs, s, w, fit_from, 25.0, innovations=True)
+        runs[threads], _ = passes._pass(obs, s, w, fit_from, 25.0, innovations=True)
+    monkeypatch.setattr(passes, "pass_pieces", lambda t, settle: [(0, 0, len(t))])
+    single, _ = passes._pass(obs, s, w, fit_from, 25.0, innovations=True)
     one, two = runs["1"], runs["2"]
     for a, b in ((one.hess, two.hess), (one.grad, two.grad), (one.stats, two.stats)):
         np.testing.assert_array_equal(a, b)  # the pieces depend on the log, never on the cores

@@ -39,7 +39,7 @@ from typing import Any, Callable, Iterable, Sequence
 __all__ = ["ItemResult", "ResultStore", "run_items", "RunnerError", "ray_available", "THREAD_ENV"]
 
 # One BLAS/numba thread per task, and one thread for the pieces of the offline fit's passes
-# (observer.offline.pass_threads; the pieces, hence the answer, are the same on any thread count):
+# (observer.passes.pass_threads; the pieces, hence the answer, are the same on any thread count):
 # parallelism comes from the tasks (2 tasks on 2 cores, not 2 x 2 threads).
 THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1",
               "TIRE_LEARNING_THREADS": "1"}

@@ -197,7 +197,7 @@ def _next_frame(z, k):
     return k
 
 
-@njit(cache=True, nogil=True)  # nogil: the offline fit runs pieces of a pass on threads (offline._pass)
+@njit(cache=True, nogil=True)  # nogil: the offline fit runs pieces of a pass on threads (passes._pass)
 def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last):
     """Process all rows (module docstring); state, health and accumulators are updated in place.
 

@@ -205,7 +205,7 @@ def _lower_posterior_cost(obs: NeuroAdaptiveObserver, rows: dict, from_causal, f
     there stopped at +13 / +15 %; started from the vehicle file's curve it reached a lower cost at
     +5.8 / +6.9 %. On the real Ferrari log the start from the prior ends at a much higher cost and the
     causal start is kept."""
-    from .offline import _pass
+    from .passes import _pass
 
     force_error = min(from_causal.force_error, from_prior.force_error)
     fit_from = float(np.asarray(rows["t"], dtype=float)[0]) + obs.settle_s
