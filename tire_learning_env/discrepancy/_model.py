@@ -85,6 +85,11 @@ CHANNELS = ("e1", "e2", "yaw_rate", "ay")
     OUT_LAG_R,
 ) = range(12)
 N_OUT = 12
+# columns of a block of rows (``blk_rows[b]`` of :func:`steering_sensitivity`, built by :mod:`.noise`)
+(
+    BLK_FIRST,  # the block's first row
+    BLK_STOP,  # the row after its last one (excluded)
+) = range(2)
 
 _G = 9.81
 #: relaxation lengths at or below this act instantly (time constant < 0.4 ms at 25 m/s) [m]
@@ -488,7 +493,7 @@ def steering_sensitivity(
     """Weighted sensitivity of every window's predictions to a steering error held over a block of rows.
 
     For window ``w`` and block ``b`` (blocks ``blk_ptr[w]..blk_ptr[w+1]-1``, each the rows
-    ``blk_rows[b, 0] .. blk_rows[b, 1] - 1``, i.e. the intervals that start on them), the
+    ``blk_rows[b, BLK_FIRST] .. blk_rows[b, BLK_STOP] - 1``, i.e. the intervals that start on them), the
     road-wheel angle is raised by ``h`` [rad] over the block's intervals and the window is
     simulated from its fitted state ``x0[w]`` (the initial state held). Fills
     ``out[m, b - blk_ptr[w]]`` = ``meas_w[m] d y_model[m] / d e_b`` for the window's
@@ -503,8 +508,8 @@ def steering_sensitivity(
         simulate_rows(xw, j0, j1, t, dl, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, traj)
         predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, base)
         for b in range(blk_ptr[w], blk_ptr[w + 1]):
-            ra = blk_rows[b, 0]
-            rb = blk_rows[b, 1]
+            ra = blk_rows[b, BLK_FIRST]
+            rb = blk_rows[b, BLK_STOP]
             for j in range(ra, rb):
                 dl[j] += h
             simulate_rows(xw, j0, j1, t, dl, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, traj)

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ._model import steering_sensitivity
+from ._model import BLK_FIRST, BLK_STOP, steering_sensitivity
 from .data import noise_std
 
 __all__ = ["InputNoise", "estimate_input_noise"]
@@ -120,7 +120,8 @@ class InputNoise:
 
 def _blocks(data, windows: NDArray, n_b: int) -> tuple[NDArray, NDArray]:
     """Blocks of ``n_b`` rows of each window: ``(ptr, rows)``, the blocks of window ``k`` are
-    ``rows[ptr[k] : ptr[k + 1]]``, each ``(first row, stop row)`` (the stop row excluded)."""
+    ``rows[ptr[k] : ptr[k + 1]]``, each ``(first row, stop row)`` (the stop row excluded; columns
+    ``BLK_FIRST``, ``BLK_STOP``)."""
     ptr = [0]
     rows = []
     for w in windows:
@@ -154,8 +155,8 @@ def _svd_windows(model, evaluation, windows: NDArray, n_b: int, sigma_u: float, 
     for k in range(len(windows)):
         a, b = sub_ptr[k], sub_ptr[k + 1]
         nb = blk_ptr[k + 1] - blk_ptr[k]
-        first, stop = blk_rows[blk_ptr[k] : blk_ptr[k + 1]].T  # each block's rows: first .. stop - 1
-        n_rows = (stop - first).astype(float)
+        blocks = blk_rows[blk_ptr[k] : blk_ptr[k + 1]]  # each block's rows: first .. stop - 1
+        n_rows = (blocks[:, BLK_STOP] - blocks[:, BLK_FIRST]).astype(float)
         A = out[a:b, :nb] * (sigma_u / np.sqrt(n_rows))[None, :]
         U, s, _ = np.linalg.svd(A, full_matrices=False)
         keep = s > keep_tol
