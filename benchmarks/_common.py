@@ -10,11 +10,25 @@ import sys
 import time
 from typing import Callable
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    # numba refuses a NUMBA_NUM_THREADS that changes once its threads run: imported into a process that
-    # already uses numba (a test), leave it as it is (a later compile there raised "Cannot set NUMBA_NUM_THREADS")
-    if not (_var == "NUMBA_NUM_THREADS" and "numba" in sys.modules):
-        os.environ.setdefault(_var, "1")
+#: the thread counts a benchmark sets to one (unless already set) before numpy or numba is imported
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+def set_one_thread_env() -> None:
+    """Default every :data:`THREAD_VARS` to one thread; call before importing numpy or numba.
+
+    This module imports neither and calls it on import, so importing ``_common`` before numpy is
+    enough; ``bench_generalization`` calls it by name at its top, before its own numpy import.
+    numba refuses a ``NUMBA_NUM_THREADS`` that changes once its threads run: in a process that already
+    imported numba (a test importing a benchmark) that one is left as it is (a later compile there raised
+    "Cannot set NUMBA_NUM_THREADS").
+    """
+    for var in THREAD_VARS:
+        if not (var == "NUMBA_NUM_THREADS" and "numba" in sys.modules):
+            os.environ.setdefault(var, "1")
+
+
+set_one_thread_env()
 
 
 def pin_to_one_core() -> None:

@@ -105,11 +105,9 @@ import time
 import traceback
 from pathlib import Path
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    # numba refuses a NUMBA_NUM_THREADS that changes once its threads run: imported into a process that
-    # already uses numba (a test), leave it as it is (a later compile there raised "Cannot set NUMBA_NUM_THREADS")
-    if not (_var == "NUMBA_NUM_THREADS" and "numba" in sys.modules):
-        os.environ.setdefault(_var, "1")
+from _common import set_one_thread_env  # imports neither numpy nor numba
+
+set_one_thread_env()  # before numpy and the package are imported
 
 import numpy as np  # noqa: E402
 
