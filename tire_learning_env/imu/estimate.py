@@ -26,7 +26,9 @@ Steps of :func:`estimate_imu` (the ``estimate`` command runs :func:`estimate_imu
    ``a_y``/``r`` innovations; the reported states are the mixture, so wherever the learned
    curve predicts the IMU worse than fixed linear tires the estimate falls back to the KF.
    Done for the causal pass (``online``, causal probabilities) and for the refined pass
-   (reported; smoothed probabilities, since that pass used the whole log anyway).
+   (reported; smoothed probabilities, since that pass used the whole log anyway). When an
+   axle's stiffness is not identified and the vehicle file lies inside the learned band on
+   both axles, the reported blend keeps the prior weights (:func:`.blend.file_not_contradicted`).
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ from ..observer import EstimateTrace, EstimationResult, ObserverConfig, estimate
 from ..observer.calibration import IMU_NOISE_WINDOW_S, estimate_noise_std
 from ..observer.model import check_sensor_columns
 from ..params import ParameterError, VehicleParams
-from .blend import Blend, BlendParams, blend_traces
+from .blend import Blend, BlendParams, blend_traces, file_not_contradicted
 from .logs import CleaningReport, clean_imu_log
 
 __all__ = ["ESTIMATE_COLUMNS", "NOISE_WINDOW_S", "ImuEstimate", "imu_config", "imu_noise_std", "estimate_imu",
@@ -132,6 +134,10 @@ class ImuEstimate:
     online_other_law : EstimateTrace or None
         The observer's causal pass under the other causal learning law (``"block"`` when the core
         ran ``"rls"``, the IMU default, and the other way round).
+    blend_fallback : dict or None
+        :func:`~.blend.file_not_contradicted` for the learned curve and the vehicle file, with
+        ``applied``: the reported blend kept the prior mode probabilities (curve not identified,
+        file inside its band on both axles).
     """
 
     core: EstimationResult
@@ -143,6 +149,7 @@ class ImuEstimate:
     runtime_s: dict
     blend_params: BlendParams = BlendParams()
     online_other_law: EstimateTrace | None = None
+    blend_fallback: dict | None = None
 
     @property
     def online(self) -> EstimateTrace:
@@ -237,12 +244,15 @@ def estimate_imu(
     runtime["linear_kf"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     # the refined pass used the whole log: its mode probabilities may too (smoothed); the causal one stays causal
-    b_final = blend_traces(core.trace, ktrace, params, smooth=config.offline)
+    # ... unless the log left the curve's scale open and did not contradict the vehicle file (blend docstring)
+    fallback = file_not_contradicted(core.stiffness_report(), (vehicle.Cf, vehicle.Cr))
+    fallback["applied"] = bool(params.unidentified_fallback and config.offline and fallback["fallback"])
+    b_final = blend_traces(core.trace, ktrace, params, smooth=config.offline, evidence=not fallback["applied"])
     b_online = blend_traces(core.online, ktrace, params, alternatives=(other,) if other else ())
     runtime["blend"] = time.perf_counter() - t0
     runtime["total"] = time.perf_counter() - t_all
     return ImuEstimate(core, ktrace, kf, b_final, b_online, noise_info, runtime, params,
-                       online_other_law=other[1] if other else None)  # fmt: skip
+                       online_other_law=other[1] if other else None, blend_fallback=fallback)  # fmt: skip
 
 
 # -- the estimate command on an IMU log -------------------------------------------------------------
@@ -414,6 +424,7 @@ def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: Obser
             "settings": result.blend_params.to_dict(),
             "reported": result.blend.summary(),
             "online": result.blend_online.summary(),
+            "reported_fallback": result.blend_fallback,
         },
         "runtime_s": {
             "observer": {k: float(v) for k, v in obs_rt.items()},
