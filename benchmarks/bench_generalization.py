@@ -105,7 +105,8 @@ import time
 import traceback
 from pathlib import Path
 
-from _common import set_one_thread_env  # imports neither numpy nor numba
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _common beside it, however this file is loaded (tests load it by path)
+from _common import set_one_thread_env  # noqa: E402  (imports neither numpy nor numba)
 
 set_one_thread_env()  # before numpy and the package are imported
 
