@@ -453,6 +453,15 @@ def test_multi_body_log_process_noise_chosen_by_whiteness():
     k, sd = np.array(res.cornering_stiffness()), np.array(res.cornering_stiffness_std())
     assert np.all(np.abs(k / np.array(k_true) - 1.0) < 0.05), k / np.array(k_true) - 1.0
     assert np.all(np.abs(k - np.array(k_true)) <= 2.0 * sd)
+    # the model's own error is reported, and the answer's lean on the stopping stage is in the band
+    assert res.summary()["model_error_detected"] is True
+    assert any(s["fit"] == "whole log (model-error sensitivity)" for s in stages)
+    alts = res.fit.mismatch_alternatives
+    G, _ = res.stiffness_functionals()
+    res.fit.mismatch_alternatives = []
+    sd_without = np.array(res.cornering_stiffness_std())
+    res.fit.mismatch_alternatives = alts
+    np.testing.assert_allclose(sd**2, sd_without**2 + (G @ alts[0]) ** 2, rtol=1e-6)
 
 
 def test_stiffness_readout_keeps_the_range_of_a_drive_that_turned_one_way():

@@ -359,7 +359,9 @@ def estimate(
         if hold_info.get("switch"):
             obs.steering_hold = hold_info["other"]
             frac = fit.force_error / (0.5 * vehicle.m * 9.81)
+            mismatch = getattr(fit, "mismatch_alternatives", [])
             fit = refine(obs, rows, fit.weights, prior_cov=obs.prior_covariance(offline=True), force_errors=(frac,))
+            fit.mismatch_alternatives = mismatch  # a single stage here: the descent's model-error finding stands
             fit, calibration["prior_length"] = select_prior_length(obs, rows, fit, choose=False)
             fit.hold_alternatives = []
             hold_info = dict(hold_info, other=calibration["steering_hold"]["used"], refitted=True)

@@ -135,11 +135,12 @@ class OfflineFit:
         squared change among its plausible alternatives (the prior length,
         :func:`select_prior_length`; the steering hold,
         :func:`.sensitivity.steering_hold_sensitivity`; the yaw dynamics when the log rejects
-        the vehicle file's, :func:`.sensitivity.yaw_dynamics_check`), summed over the assumptions."""
+        the vehicle file's, :func:`.sensitivity.yaw_dynamics_check`; the process noise where the
+        innovations showed the model's own error, :func:`refine`), summed over the assumptions."""
         g = np.atleast_2d(g)
         out = np.zeros(g.shape[0])
         for alts in (getattr(self, "prior_alternatives", None) or [], getattr(self, "hold_alternatives", None) or [],
-                     getattr(self, "dynamics_alternatives", None) or []):
+                     getattr(self, "dynamics_alternatives", None) or [], getattr(self, "mismatch_alternatives", None) or []):
             if alts:
                 out += np.max(np.vstack([(g @ d) ** 2 for d in alts]), axis=0)
         return out
@@ -318,6 +319,11 @@ def refine(
         lateral-offset innovations were correlated 0.19-0.24 over 1-5 frames at the smallest
         process noise (the chosen one), and the stiffness read -5.7 / -8.3 % against the
         effective stiffness; at the stage whose innovations were white, -2.6 / -3.9 %.
+        The answer then leans on where the descent stopped: the stage whose innovations turned
+        correlated is refitted on the whole log from the answer (``continuation_iter`` passes),
+        and the weight change is kept in ``fit.mismatch_alternatives`` (the bands add it, as
+        :meth:`OfflineFit.prior_sensitivity` does every assumption the log cannot settle);
+        ``force_error_calibration["model_error_detected"]`` says so.
     """
     nw = observer.n_weights
     lo, hi = observer._weight_box()
@@ -363,10 +369,13 @@ def refine(
     cheap_w: list = []
     j = n_st - 1  # the stage to fit on the whole log
     seen_white = False
+    coloured = None  # the first stage whose innovations turned correlated after white ones: the model's own error
     for i in range(n_st - 1):
         w_fit, nis, white = fit_stage(i, w, sub, sub_from, continuation_iter, 100.0 * min_decrease, "continuation")
         if i > 0 and (nis > nis_limit or (seen_white and white is False)):
             j = i - 1  # the model error is larger than this stage's process noise
+            if nis <= nis_limit:
+                coloured = i
             break
         cheap_w.append(w_fit)
         w = w_fit
@@ -378,6 +387,7 @@ def refine(
         observer.set_force_error(force_errors[j] * load)
         acc_last, _ = _pass(observer, sub, w, sub_from, gate, innovations=True)
         if not record(force_errors[j] * load, acc_last, 0, "continuation (test only)", True):
+            coloured = j
             j -= 1
             w = cheap_w[j]
     # the stage reached, on the whole log; its neighbours too when the whole log disagrees
@@ -398,10 +408,17 @@ def refine(
             w_j = w_up
             chosen = (force_errors[j] * load, w_j.copy(), nis_up)
     fe, w, nis = chosen
+    mismatch = []
+    if coloured is not None and coloured == j + 1:  # how far the answer leans on the stage the model's error stopped
+        w_c, _, _ = fit_stage(coloured, w, sensors, fit_from, continuation_iter, 100.0 * min_decrease,
+                              "whole log (model-error sensitivity)")  # fmt: skip
+        mismatch = [w_c - w]
     observer.set_force_error(fe)
     fit = _final_fit(observer, sensors, w, Lam, fit_from, gate, all_costs, iters)
     fit.force_error = fe
-    fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe}
+    fit.mismatch_alternatives = mismatch
+    fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe,
+                                   "model_error_detected": bool(mismatch)}  # fmt: skip
     return fit
 
 
@@ -514,6 +531,7 @@ def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: Off
     new.prior_alternatives = getattr(fit, "prior_alternatives", [])
     new.hold_alternatives = getattr(fit, "hold_alternatives", [])
     new.dynamics_alternatives = getattr(fit, "dynamics_alternatives", [])
+    new.mismatch_alternatives = getattr(fit, "mismatch_alternatives", [])
     return new, info
 
 
