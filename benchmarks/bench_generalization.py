@@ -465,6 +465,7 @@ def run_scenario(sc: dict) -> dict:
             "covered_2sigma": [_covered(k[j], s[j], k_true[j]) for j in range(2)],
             "identified": [bool(rep[a]["identified"]) for a in AXLES],
             "verdict": res.verdict,
+            "model_error_detected": res.summary()["model_error_detected"],
             "curve_nrmse": [m["tire_curve_nrmse"][a] for a in AXLES],
             "slip_rmse_deg": [m["slip_rmse_deg"][a] for a in AXLES],
             "runtime_s": float(res.runtime_s.get("total", wall)),
@@ -745,6 +746,7 @@ def summarise(records: list[dict], est: str) -> dict:
         for r in ok:
             verdicts[r["verdict"]] = verdicts.get(r["verdict"], 0) + 1
         out["verdict_counts"] = verdicts
+        out["model_error_detected"] = sum(bool(r.get("model_error_detected")) for r in ok)
         # coverage among the identified axles only (what a user would be shown as a number)
         cov_id = [c for r in ok for c, i in zip(r["covered_2sigma"], r["identified"]) if i]
         out["band_coverage_identified_axles"] = {"fraction": float(np.mean(cov_id)) if cov_id else None, "n": len(cov_id)}
@@ -958,6 +960,8 @@ def markdown_table(result: dict) -> str:
             cov = v["band_coverage"]["fraction"]
             cov_txt = "n/a" if cov is None else f"{100 * cov:.0f} % of {v['band_coverage']['n']}"
             verd = ", ".join(f"{k} {n}" for k, n in (v.get("verdict_counts") or {}).items()) or "-"
+            if v.get("model_error_detected"):
+                verd += f"; model error flagged {v['model_error_detected']}"
             name = fam + (" (held out)" if block["held_out"] else "")
             lines.append(
                 f"| {name} | {est} | {nval} / {block['observer']['scenarios']} (failed {v['failed']}) | "
