@@ -126,6 +126,18 @@ def _rhs_arrays(x, delta, cd, vx, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi
 
 
 @njit(cache=True, inline="always")
+def matmul_into(A, B, out, n_rows, n_inner, n_cols):
+    """``out[:n_rows, :n_cols] = A[:n_rows, :n_inner] @ B[:n_inner, :n_cols]``, each entry summed from 0 in
+    ``q`` order (the order the covariance and gain products were written in; inlined, so bit-identical)."""
+    for i in range(n_rows):
+        for j in range(n_cols):
+            acc = 0.0
+            for q in range(n_inner):
+                acc += A[i, q] * B[q, j]
+            out[i, j] = acc
+
+
+@njit(cache=True, inline="always")
 def _jacobian(cd, vx, kf, kr, m, Iz, lf, lr, nx, J):
     """``J = d x_dot / d x`` at total slopes ``k_f``, ``k_r`` (plain arguments: the hot path)."""
     v = vx if vx > V_FLOOR else V_FLOOR
@@ -215,12 +227,7 @@ def _predict_arrays(dt, delta0, ddot, vx0, ax, kappa0, kdot, x, w, ups, sig, veh
             for a in range(nw):
                 ups[i, a] = U[i, a]
         # Sigma <- Phi Sigma Phi^T + h Q (force-error intensity on both axles)
-        for i in range(nx):
-            for j in range(nx):
-                acc = 0.0
-                for q in range(nx):
-                    acc += Phi[i, q] * sig[q, j]
-                T1[i, j] = acc
+        matmul_into(Phi, sig, T1, nx, nx, nx)
         for i in range(nx):
             for j in range(nx):
                 acc = 0.0

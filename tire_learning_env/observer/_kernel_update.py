@@ -12,7 +12,7 @@ import numpy as np
 from numba import njit
 
 from .._jit_cache import key_on_family
-from ._kernel_predict import forces
+from ._kernel_predict import forces, matmul_into
 from ._kernel_types import (CH_AY, CH_E1, E1, E2, GROUP_CAMERA, HEALTH_DIVERGED, HEALTH_INCONSISTENT, HEALTH_NO_DATA,
                             HEALTH_OK, HEALTH_RECOVERING, HEALTH_SETTLING, HS_CKPT_HEAD, HS_CODE, HS_COUNT, HS_DOF,
                             HS_HEAD, HS_LAST_CKPT, HS_LAST_MEAS, HS_N_CKPT, HS_STARTED, HS_SUM, HS_T0, HS_TRIP_T,
@@ -133,12 +133,7 @@ def update(group, st, delta, vx, zk, M, G, S, adapt, accumulate, acc, score, k, 
     sw01 = 0.0
     sw11 = 0.0
     if adapt:  # P_w Psi^T is needed for the gain
-        for c in range(2):
-            for b in range(nw):
-                acc_ = 0.0
-                for a in range(nw):
-                    acc_ += wk.Psi[c, a] * st.pw[a, b]
-                wk.PsiP[c, b] = acc_
+        matmul_into(wk.Psi, st.pw, wk.PsiP, 2, nw, nw)
         for a in range(nw):
             sw00 += wk.PsiP[0, a] * wk.Psi[0, a]
             sw01 += wk.PsiP[0, a] * wk.Psi[1, a]
@@ -238,12 +233,7 @@ def update(group, st, delta, vx, zk, M, G, S, adapt, accumulate, acc, score, k, 
     for i in range(nx):
         for j in range(nx):
             wk.T1[i, j] = (1.0 if i == j else 0.0) - L[i, 0] * wk.H[0, j] - L[i, 1] * wk.H[1, j]
-    for i in range(nx):
-        for j in range(nx):
-            a_ = 0.0
-            for q in range(nx):
-                a_ += wk.T1[i, q] * st.sig[q, j]
-            wk.Phi[i, j] = a_
+    matmul_into(wk.T1, st.sig, wk.Phi, nx, nx, nx)
     for i in range(nx):
         for j in range(nx):
             a_ = L[i, 0] * r0 * L[j, 0] + L[i, 1] * r1 * L[j, 1]
