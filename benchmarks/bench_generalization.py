@@ -105,10 +105,21 @@ import time
 import traceback
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # _common beside it, however this file is loaded (tests load it by path)
-from _common import set_one_thread_env  # noqa: E402  (imports neither numpy nor numba)
 
-set_one_thread_env()  # before numpy and the package are imported
+def _load_bench_common():
+    """``benchmarks/_common.py`` (it imports neither numpy nor numba) under a private module name, without
+    touching ``sys.path``: tests import this file into a process that also runs ``agents/``, whose own
+    ``_common`` module a top-level ``import _common`` from here would shadow (agents/train.py then failed
+    with "cannot import name 'algo_class' from '_common'")."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("_bench_generalization_common", Path(__file__).resolve().parent / "_common.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+_load_bench_common().set_one_thread_env()  # before numpy and the package are imported
 
 import numpy as np  # noqa: E402
 
