@@ -322,8 +322,8 @@ def refine(
         The answer then leans on where the descent stopped: the stage whose innovations turned
         correlated is refitted on the whole log from the answer (``continuation_iter`` passes),
         and the weight change is kept in ``fit.mismatch_alternatives`` (the bands add it, as
-        :meth:`OfflineFit.prior_sensitivity` does every assumption the log cannot settle);
-        ``force_error_calibration["model_error_detected"]`` says so.
+        :meth:`OfflineFit.prior_sensitivity` does every assumption the log cannot settle); the
+        result's ``summary()["model_error_detected"]`` says so.
     """
     nw = observer.n_weights
     lo, hi = observer._weight_box()
@@ -417,8 +417,7 @@ def refine(
     fit = _final_fit(observer, sensors, w, Lam, fit_from, gate, all_costs, iters)
     fit.force_error = fe
     fit.mismatch_alternatives = mismatch
-    fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe,
-                                   "model_error_detected": bool(mismatch)}  # fmt: skip
+    fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe}
     return fit
 
 

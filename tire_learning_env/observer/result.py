@@ -191,8 +191,7 @@ class EstimationResult:
             "stiffness_rear_N_per_rad": rep["rear"]["estimate_N_per_rad"],
             "stiffness_rear_2sigma_N_per_rad": rep["rear"]["band_2sigma_N_per_rad"],
             # the offline fit's innovations turned correlated as the process noise fell: dynamics the model lacks
-            "model_error_detected": (None if self.fit is None else
-                                     bool(self.fit.force_error_calibration.get("model_error_detected", False))),
+            "model_error_detected": None if self.fit is None else bool(getattr(self.fit, "mismatch_alternatives", None)),
             "health_final": self.online.final_health,
             "health_ok_fraction": self.online.health_fraction["ok"],
             "runtime_s": float(self.runtime_s.get("total", float("nan"))),
