@@ -53,9 +53,9 @@ import time
 from pathlib import Path
 
 if "numba" not in sys.modules:  # numba refuses a thread count that changes once its threads run (a test process)
-    os.environ.setdefault("NUMBA_NUM_THREADS", "2")  # the target is on 2 cores (before _common's default of 1)
+    os.environ.setdefault("NUMBA_NUM_THREADS", "2")  # the target is on 2 cores (before _bench_common's default of 1)
 
-from _common import emit  # noqa: E402
+from _bench_common import emit  # noqa: E402
 
 import numpy as np  # noqa: E402
 

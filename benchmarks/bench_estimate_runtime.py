@@ -12,7 +12,7 @@ Per log: the wall time of each step (:attr:`~tire_learning_env.observer.Estimati
 the process CPU time, rows per second, the fixed-weight passes of the offline fit and the
 latency profile (count, seconds), the peak resident memory (``ru_maxrss``) and, so that speed
 is never bought with accuracy, the estimated stiffness, its two-sigma band and its error
-against the truth. BLAS runs single-threaded (``_common``), as everywhere in the benchmarks.
+against the truth. BLAS runs single-threaded (``_bench_common``), as everywhere in the benchmarks.
 
 Run: ``python benchmarks/bench_estimate_runtime.py`` (``--log NAME`` for one log).
 """
@@ -26,7 +26,7 @@ import subprocess
 import sys
 import time
 
-from _common import emit
+from _bench_common import emit
 
 LOGS = ("study1_60s_1kHz", "lane_changes_30min_100Hz")
 TARGET = {"wall_s": 10.0, "peak_MB": 500.0}

@@ -23,7 +23,7 @@ import importlib.util
 import time
 from pathlib import Path
 
-from _common import emit
+from _bench_common import emit
 
 import numpy as np  # noqa: E402
 
@@ -49,7 +49,7 @@ def env_rate(make, seconds: float = 4.0) -> float:
 
 
 def _agents_common():
-    """``agents/_common.py`` (its name clashes with this directory's ``_common``)."""
+    """``agents/_common.py``, loaded from its file (``agents/`` is not on ``sys.path`` here)."""
     spec = importlib.util.spec_from_file_location("agents_common", REPO / "agents" / "_common.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

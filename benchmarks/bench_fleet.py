@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import emit  # noqa: E402  (sets one BLAS thread per process)
+from _bench_common import emit  # noqa: E402  (sets one BLAS thread per process)
 
 import numpy as np  # noqa: E402
 

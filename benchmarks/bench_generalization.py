@@ -105,21 +105,9 @@ import time
 import traceback
 from pathlib import Path
 
+import _bench_common
 
-def _load_bench_common():
-    """``benchmarks/_common.py`` (it imports neither numpy nor numba) under a private module name, without
-    touching ``sys.path``: tests import this file into a process that also runs ``agents/``, whose own
-    ``_common`` module a top-level ``import _common`` from here would shadow (agents/train.py then failed
-    with "cannot import name 'algo_class' from '_common'")."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("_bench_generalization_common", Path(__file__).resolve().parent / "_common.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-_load_bench_common().set_one_thread_env()  # before numpy and the package are imported
+_bench_common.set_one_thread_env()  # before numpy and the package are imported (again if the module was imported earlier)
 
 import numpy as np  # noqa: E402
 

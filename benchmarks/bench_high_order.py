@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import time
 
-from _common import emit, median_time, pin_to_one_core, time_env_steps
+from _bench_common import emit, median_time, pin_to_one_core, time_env_steps
 
 pin_to_one_core()
 

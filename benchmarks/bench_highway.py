@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import time
 
-from _common import emit, pin_to_one_core
+from _bench_common import emit, pin_to_one_core
 
 pin_to_one_core()
 

@@ -27,7 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import emit, pin_to_one_core
+from _bench_common import emit, pin_to_one_core
 
 pin_to_one_core()
 

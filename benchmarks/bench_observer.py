@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import time
 
-from _common import emit, median_time, pin_to_one_core
+from _bench_common import emit, median_time, pin_to_one_core
 
 import tire_learning_env  # noqa: F401
 from tire_learning_env.baselines.ukf import run_ukf_baseline

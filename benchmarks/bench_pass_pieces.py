@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from _common import emit
+from _bench_common import emit
 
 OVERLAPS_S = (0.0, 2.0, 5.0, 10.0, 30.0)
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 
-from _common import emit
+from _bench_common import emit
 
 import numpy as np  # noqa: E402
 

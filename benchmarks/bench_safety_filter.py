@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import time
 
-from _common import emit
+from _bench_common import emit
 
 import numpy as np  # noqa: E402
 

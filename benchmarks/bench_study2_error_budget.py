@@ -39,7 +39,7 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
-from _common import emit
+from _bench_common import emit
 
 import numpy as np  # noqa: E402
 from scipy.signal import butter, filtfilt  # noqa: E402

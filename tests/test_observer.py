@@ -25,6 +25,22 @@ from tire_learning_env.observer.model import linear_matrices, measurement_model
 from tire_learning_env.params import CameraParams, ParameterError, VehicleParams
 from tire_learning_env.simulation import simulate
 
+
+def _bench_generalization():
+    """``benchmarks/bench_generalization.py`` imported as a module (``benchmarks/`` is not a package; its
+    ``_bench_common`` is imported from the same folder)."""
+    import sys
+    from pathlib import Path
+
+    bench = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    sys.path.insert(0, bench)
+    try:
+        import bench_generalization
+    finally:
+        sys.path.remove(bench)
+    return bench_generalization
+
+
 V = VehicleParams()
 OK = HEALTH_NAMES.index("ok")
 
@@ -281,13 +297,7 @@ def test_stiffness_band_carries_the_prior_length_sensitivity():
     noise, 37 ms latency (scenario 0 of the generalisation benchmark's tuning family). The 1-deg
     smooth prior alone read -0.83 / -0.61 % with a sigma of 0.28 % (3 sigma off); the 0.5-deg prior,
     which the log's evidence cannot rule out, -0.19 / -0.22 %. The band now carries that spread."""
-    import importlib.util
-    from pathlib import Path
-
-    spec = importlib.util.spec_from_file_location("bench_gen", Path(__file__).resolve().parents[1] / "benchmarks" /
-                                                  "bench_generalization.py")  # fmt: skip
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = _bench_generalization()
     sc = bench.sample_scenario("low_order_pacejka", 0, 15, False, attempt=1)
     assert sc["vehicle"] == "race_car"
     log, _, _, nominal, _, k_true = bench.build(sc)
@@ -436,13 +446,7 @@ def test_multi_body_log_process_noise_chosen_by_whiteness():
     by the NIS alone, read -5.6 / -8.2 % against the effective stiffness with a band of +/-0.6 / 0.4 %
     (lateral-offset innovations correlated 0.19-0.24 over 1-5 frames). The stage whose innovations
     are white reads -2.7 / -4.0 %, and its band holds the effective stiffness."""
-    import importlib.util
-    from pathlib import Path
-
-    spec = importlib.util.spec_from_file_location("bench_gen", Path(__file__).resolve().parents[1] / "benchmarks" /
-                                                  "bench_generalization.py")  # fmt: skip
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = _bench_generalization()
     sc = bench.sample_scenario("multi_body", 4, 15, False)
     log, _, _, nominal, _, k_true = bench.build(sc)
     res = estimate(log.sensors, nominal, config=ObserverConfig(sensors="camera"))

@@ -1,4 +1,8 @@
-"""Helpers shared by the benchmark scripts: one-core settings, timing, JSON output."""
+"""Helpers shared by the benchmark scripts: one-core settings, timing, JSON output.
+
+Named ``_bench_common``, not ``_common``: ``agents/`` has its own ``_common`` module, and a test process
+that imports scripts from both folders would otherwise get whichever was imported first under that name.
+"""
 
 from __future__ import annotations
 
@@ -17,8 +21,9 @@ THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NU
 def set_one_thread_env() -> None:
     """Default every :data:`THREAD_VARS` to one thread; call before importing numpy or numba.
 
-    This module imports neither and calls it on import, so importing ``_common`` before numpy is
-    enough; ``bench_generalization`` calls it by name at its top, before its own numpy import.
+    This module imports neither and calls it on import, so importing ``_bench_common`` before numpy is
+    enough; ``bench_generalization`` also calls it by name at its top, before its own numpy import (a
+    process that imported this module earlier does not run it again on import).
     numba refuses a ``NUMBA_NUM_THREADS`` that changes once its threads run: in a process that already
     imported numba (a test importing a benchmark) that one is left as it is (a later compile there raised
     "Cannot set NUMBA_NUM_THREADS").
