@@ -228,12 +228,7 @@ def _predict_arrays(dt, delta0, ddot, vx0, ax, kappa0, kdot, x, w, ups, sig, veh
                 ups[i, a] = U[i, a]
         # Sigma <- Phi Sigma Phi^T + h Q (force-error intensity on both axles)
         matmul_into(Phi, sig, T1, nx, nx, nx)
-        for i in range(nx):
-            for j in range(nx):
-                acc = 0.0
-                for q in range(nx):
-                    acc += T1[i, q] * Phi[j, q]
-                sig[i, j] = acc
+        matmul_into(T1, Phi.T, sig, nx, nx, nx)  # Phi.T: a transposed view, B[q, j] = Phi[j, q]
         qf, qr = q_force[0] * h, q_force[1] * h
         sig[VY, VY] += qf * ev0f * ev0f + qr * ev0r * ev0r
         sig[VY, R] += qf * ev0f * ev1f + qr * ev0r * ev1r
