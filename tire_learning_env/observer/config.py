@@ -12,15 +12,7 @@ from ..params import CameraParams, ParameterError, _Params
 from .gains import GainDesign
 from .settings import AdaptationParams, HealthParams
 
-__all__ = ["ObserverConfig", "CAMERA_PRIOR_LENGTH_DEG"]
-
-#: The smooth-curve prior's length scale [deg] of a camera-only log's offline fit. A longer prior pulls the
-#: slope profile toward a straight line through the slip the drive excited, so a saturating curve's slope at
-#: zero (the stiffness) reads low: on the generalisation benchmark's tuning family (n = 5, seed 15) 1 deg read
-#: 9 of 10 axles low, median |error| 0.75 %, and on a noise-free re-run of scenario 0 with the drawn noise
-#: level assumed -0.42 / -0.39 % (the prior's pull, not the noise: ``benchmarks/bench_prior_shape_bias.py``);
-#: 0.5 deg read a median of 0.37 % (worst 2.9 %, inside its band). The bands still carry the neighbouring lengths.
-CAMERA_PRIOR_LENGTH_DEG = 0.5
+__all__ = ["ObserverConfig"]
 
 #: The fields :meth:`ObserverConfig.adaptation` hands to :class:`AdaptationParams` as they are;
 #: their defaults are its defaults (a dataclass' class attribute), as are the gain design's and the health test's.
@@ -70,16 +62,12 @@ class ObserverConfig(_Params):
         Gain design (:class:`~.gains.GainDesign`).
     initial_std, random_walk, max_std, prior_symmetry, sensor_offsets
         Weight prior and adaptation (:class:`~.neuro_adaptive.AdaptationParams`).
-    prior_length : float, optional
-        Length scale [deg] of the smooth-curve prior of the offline fit (and of the causal
-        block law's prior). Default (``None``): :class:`~.neuro_adaptive.AdaptationParams`' 1 deg,
-        except for a camera-only log's offline fit, which uses :data:`CAMERA_PRIOR_LENGTH_DEG`
-        (0.5 deg; the causal pass keeps 1 deg: its drift test read +3.2 % at 0.5 deg against a
-        3 % bound; the IMU and fused estimators were measured with 1 deg). The bands add how much the answer moves at the neighbouring lengths
-        of the grid 0.25, 0.5, 1, 2 deg that the log's evidence cannot rule out
-        (:func:`.offline.select_prior_length`). Choosing the length by the evidence was measured
-        worse on the generalisation benchmark's tuning family (median stiffness error 0.93 %
-        against 0.51 %).
+    prior_length : float
+        Length scale [deg] of the smooth-curve prior of the offline fit. The bands add how much
+        the answer moves at the neighbouring lengths of the grid 0.25, 0.5, 1, 2 deg that the
+        log's evidence cannot rule out (:func:`.offline.select_prior_length`). Choosing the
+        length by the evidence was measured worse on the generalisation benchmark's tuning
+        family (median stiffness error 0.93 % against 0.51 %).
     online_prior_length : float, optional
         Prior length scale [deg] of the causal pass' ``"rls"`` law; default 0 with a camera,
         ``prior_length`` for IMU-only (:class:`~.neuro_adaptive.AdaptationParams` says why).
@@ -115,7 +103,7 @@ class ObserverConfig(_Params):
     initial_std: float = AdaptationParams.initial_std
     random_walk: float = AdaptationParams.random_walk
     max_std: float = AdaptationParams.max_std
-    prior_length: float | None = None  # None: by the sensors (CAMERA_PRIOR_LENGTH_DEG for a camera-only log)
+    prior_length: float = AdaptationParams.prior_length
     prior_symmetry: float = AdaptationParams.prior_symmetry
     online_prior_length: float | None = AdaptationParams.online_prior_length
     causal_update: str | None = None  # None: by the sensors (above), not AdaptationParams' default
@@ -128,7 +116,7 @@ class ObserverConfig(_Params):
     _positive: ClassVar[tuple[str, ...]] = ("initial_std", "max_std", "nis_factor", "identifiable_rel_2sigma",
                                             "curve_rel_2sigma", "camera_force_error", "imu_force_error")  # fmt: skip
     _non_negative: ClassVar[tuple[str, ...]] = ("max_latency", "linear_region_deg", "decay_rate", "imu_decay_rate",
-                                                "random_walk", "prior_symmetry")  # fmt: skip
+                                                "random_walk", "prior_length", "prior_symmetry")  # fmt: skip
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -145,10 +133,6 @@ class ObserverConfig(_Params):
                 if arr.shape != (2,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
                     raise ParameterError(f"ObserverConfig.{name} must be two std values >= 0, got {v!r}")
                 object.__setattr__(self, name, tuple(float(x) for x in arr))
-        if self.prior_length is not None and not (isinstance(self.prior_length, (int, float))
-                                                  and not isinstance(self.prior_length, bool)
-                                                  and math.isfinite(self.prior_length) and self.prior_length >= 0):
-            raise ParameterError(f"ObserverConfig.prior_length must be >= 0 deg or None, got {self.prior_length!r}")
         if self.latency is not None and not (math.isfinite(self.latency) and self.latency >= 0):
             raise ParameterError(f"ObserverConfig.latency must be >= 0 s or None, got {self.latency!r}")
 
@@ -161,10 +145,8 @@ class ObserverConfig(_Params):
 
     def adaptation(self) -> AdaptationParams:
         """The weight prior and learning law (:data:`ADAPTATION_FIELDS`; ``causal_update`` None: the block law)."""
-        kw = {name: getattr(self, name) for name in ADAPTATION_FIELDS}
-        if kw["prior_length"] is None:  # by the sensors: build_observer sets the camera-only length
-            kw["prior_length"] = AdaptationParams.prior_length
-        return AdaptationParams(**kw, causal_update=self.causal_update or AdaptationParams.causal_update)
+        return AdaptationParams(**{name: getattr(self, name) for name in ADAPTATION_FIELDS},
+                                causal_update=self.causal_update or AdaptationParams.causal_update)  # fmt: skip
 
     def gain_design(self) -> GainDesign:
         return GainDesign(camera_decay_rate=self.decay_rate, imu_decay_rate=self.imu_decay_rate,

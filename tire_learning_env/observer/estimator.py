@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..params import CameraParams, ParameterError, VehicleParams
 from .basis import SoftClipBasis, imu_basis, make_basis
 from .calibration import NOISE_DEFAULT, NOISE_FLOOR, _noise, sample_period
-from .config import CAMERA_PRIOR_LENGTH_DEG, ObserverConfig
+from .config import ObserverConfig
 from .gains import synthesize_gains
 from .latency import _estimate_latency, _profile_window  # noqa: F401  (_profile_window: re-exported)
 from .model import MeasurementModel, measurement_model
@@ -317,8 +317,6 @@ def estimate(
         t0 = time.perf_counter()
         # camera logs: a process-noise stage must also leave the camera innovations white (offline.refine)
         white = model.name == "camera"
-        if config.prior_length is None and white:  # the offline fit's prior length by the sensors (ObserverConfig)
-            obs.adaptation = obs.adaptation.replace(prior_length=CAMERA_PRIOR_LENGTH_DEG)
         fit = refine(obs, rows, online_w, prior_cov=obs.prior_covariance(offline=True), whiteness=white)
         if model.name == "imu" and np.any(online_w != 0):  # the per-measurement causal law can leave it far off
             fit = _lower_posterior_cost(obs, rows, fit, refine(obs, rows, np.zeros_like(online_w),
