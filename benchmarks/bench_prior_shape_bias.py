@@ -7,8 +7,8 @@ scenario of that family (the drive the benchmark scores) and separates the candi
 drive with the camera noise scaled down to 2 % (the same seed, so the same driver and road) and running the
 observer on it in several ways:
 
-Every run sets the prior's length scale explicitly (1 deg, the camera default before
-``CAMERA_PRIOR_LENGTH_DEG``, unless the name says otherwise), so the figures do not move with the default.
+Every run sets the prior's length scale explicitly (1 deg, the default, unless the name says otherwise), so
+the figures do not move with the default.
 
 ``as_drawn``
     the benchmark's log, defaults otherwise (what the benchmark scored with 1 deg);
