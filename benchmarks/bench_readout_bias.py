@@ -27,11 +27,8 @@ def scenario(i: int) -> dict:
     from tire_learning_env.observer import ObserverConfig, estimate
     from tire_learning_env.observer.readout import curve_gradient, stiffness_readout
 
-    sc = bg.sample_scenario("low_order_pacejka", i, 15, False)
-    log, plant, _, nominal, true_curve, k_true = bg.build(sc)
-    while not bg.truth_summary(log, plant, sc)["valid"] and sc["attempt"] < bg.MAX_REDRAWS:
-        sc = bg.sample_scenario("low_order_pacejka", i, 15, False, attempt=sc["attempt"] + 1)
-        log, plant, _, nominal, true_curve, k_true = bg.build(sc)
+    sc, (log, _, _, nominal, true_curve, k_true), _, _ = bg._build_with_redraws(
+        bg.sample_scenario("low_order_pacejka", i, 15, False), bg.build, lambda b: bg.truth_summary(b[0], b[1], None))
     res = estimate(log.sensors, nominal, config=ObserverConfig(sensors="camera"))
     obs, slip = res.observer, res.trace.slip
     c_nom = (obs.vehicle.Cf, obs.vehicle.Cr)
