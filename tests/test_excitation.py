@@ -222,13 +222,15 @@ def test_smoke_training(tmp_path, config):
     train = _load_script("train")
     out = tmp_path / config.split(".")[0]
     overrides = ["--total-timesteps", "400", "--no-validation", "--no-progress"]
+    # the committed config with a smoke-sized update: learning must actually happen within the 400 steps
+    cfg = json.loads((AGENTS / "configs" / config).read_text())
     if config == "sac.json":  # learning must actually start within the smoke budget
-        cfg = json.loads((AGENTS / "configs" / config).read_text())
         cfg["algo_kwargs"]["learning_starts"] = 100
-        (tmp_path / config).write_text(json.dumps(cfg))
-        path = tmp_path / config
-    else:
-        path = AGENTS / "configs" / config
+    else:  # one PPO rollout of 200 steps per env (n_envs 2) is the 400 steps; the committed 1200 drove 2400
+        assert cfg["n_envs"] == 2
+        cfg["algo_kwargs"].update(n_steps=200, batch_size=100)
+    (tmp_path / config).write_text(json.dumps(cfg))
+    path = tmp_path / config
     assert train.main(["--config", str(path), "--seed", "1", "--out", str(out), *overrides]) == 0
     run = json.loads((out / "run.json").read_text())
     assert run["timesteps"] >= 400 and run["seed"] == 1

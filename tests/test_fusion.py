@@ -32,6 +32,16 @@ def log():
     return simulate("lane_changes", 12.0, camera=CameraParams.paper_noise(rate=20.0), seed=3)
 
 
+@pytest.fixture(scope="module")
+def rows_100hz(log):
+    """The same drive's rows at 100 Hz (every 10th 1 kHz row; all 240 camera frames kept): the equality tests
+    compare two estimators on one log, exactly, so the rate does not make them weaker; the 1 kHz rows made each
+    estimate about 3-7 times slower."""
+    s = {k: np.asarray(v, dtype=float)[::10] for k, v in log.sensors.items()}
+    assert np.isfinite(s["e1"]).sum() == np.isfinite(log.sensors["e1"]).sum() == 240
+    return s
+
+
 def _nominal(log):
     v = log.vehicle
     return v.replace(Cf=1.1 * v.Cf, Cr=0.92 * v.Cr)
@@ -62,8 +72,8 @@ def _assert_same(a, b):
         np.testing.assert_array_equal(a.axle_force_std(alpha, axle), b.axle_force_std(alpha, axle))
 
 
-def test_fusion_without_imu_equals_camera_estimator(log):
-    s = _without(log.sensors, ("ay", "yaw_rate"))
+def test_fusion_without_imu_equals_camera_estimator(log, rows_100hz):
+    s = _without(rows_100hz, ("ay", "yaw_rate"))
     fused = estimate(s, _nominal(log), config=ObserverConfig(sensors="both"))
     camera = estimate(s, _nominal(log), config=ObserverConfig(sensors="camera"))
     assert fused.sensors == "camera" and fused.calibration["sensors"] == "camera"
@@ -73,8 +83,8 @@ def test_fusion_without_imu_equals_camera_estimator(log):
     _assert_same(fused, camera)
 
 
-def test_fusion_without_camera_equals_imu_estimator(log):
-    s = _without(log.sensors, ("e1", "e2"))
+def test_fusion_without_camera_equals_imu_estimator(log, rows_100hz):
+    s = _without(rows_100hz, ("e1", "e2"))
     fused = estimate(s, _nominal(log), config=ObserverConfig(sensors="both"))
     imu = estimate(s, _nominal(log), config=ObserverConfig(sensors="imu"))
     assert fused.sensors == "imu" and fused.calibration["fusion_fallback"]["ran"] == "imu"

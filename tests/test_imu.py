@@ -2,6 +2,7 @@
 blend (never worse than the KF on a noisy-a_y log), log reading and cleaning, the real log."""
 
 import csv
+import functools
 import json
 from pathlib import Path
 
@@ -282,11 +283,18 @@ def test_imu_noise_measured_over_a_fixed_time_span():
 
 
 # ---- reading and cleaning real IMU logs --------------------------------------------------------
-def _imu_columns(n=2000, dt=0.01, seed=0):
+@functools.lru_cache(maxsize=None)
+def _imu_drive(n, dt, seed):
     sensors, truth, _ = simulate_imu_drive(V, duration=(n - 1) * dt, dt=dt, seed=seed)
     cols = {k: sensors[k] for k in ("t", "vx", "delta", "yaw_rate", "ay", "ax")}
     cols["true_beta"] = truth["true_beta"]
     return cols
+
+
+def _imu_columns(n=2000, dt=0.01, seed=0):
+    """The drive is simulated once per setting (it was simulated afresh, identically, by each of the ten
+    reader tests); every call gets its own copy of the columns, which the tests mutate."""
+    return {k: v.copy() for k, v in _imu_drive(n, dt, seed).items()}
 
 
 def _write(tmp_path, cols, name="log.csv"):
