@@ -419,12 +419,21 @@ def curvature_at(s, source, curve_a, curve_b, curve_ds):
 
 @njit(cache=True)
 def advance_ticks(
-    n_ticks, dt, tick0, state, s0, vx0, ax, plant, curve, s_stop, preview_time, camera, driver,
-    steering_offset, steering, last_delta, lane_change, out,
+    n_ticks, dt, tick0, state, s0, vx0, ax,
+    veh, tf, tr, tabf, tabr, eff,                           # plant: BicyclePlant.kernel_params()
+    curve_source, curve_a, curve_b, curve_ds, curve_cum,    # curvature source (curvature_at)
+    s_stop, preview_time,
+    cam, cstate, counters, pending, noise, drop,            # camera: Camera.kernel_args()
+    drv, dstate, guard,                                     # driver: LaneKeepingDriver.kernel_args()
+    steering_offset, steering, last_delta,
+    lc_offset, lc_s0, lc_len,                               # lane-change path (NO_LANE_CHANGE: none)
+    out,
 ):  # fmt: skip
     """Run up to ``n_ticks`` ticks of camera -> driver -> a_y guard -> RK4 plant; fill ``out`` rows.
 
-    The one compiled tick loop (the base simulator and the highway ego car).
+    The one compiled tick loop (the base simulator and the highway ego car). The arguments are
+    flat, in named groups a caller passes by unpacking the group's tuple in place (``*group``),
+    e.g. ``*plant.kernel_params()`` or ``*NO_LANE_CHANGE``: see the Notes for why.
 
     Parameters
     ----------
@@ -435,31 +444,35 @@ def advance_ticks(
     s0, vx0, ax
         Path coordinate [m], speed [m/s] at the first tick and the longitudinal acceleration
         [m/s^2] held over the chunk (``vx`` is integrated tick by tick; constant when ``ax = 0``).
-    plant : tuple
-        The plant's compiled parameters ``(vehicle V_*, tire_front T_*, tire_rear, table_front,
-        table_rear, effects X_*)`` (``BicyclePlant.kernel_params()``).
-    curve : tuple
-        ``(kind, a, b, ds, cum)``: kind ``CURVATURE_TABLE`` with ``a, b`` = kappa [1/m] and
-        dkappa/ds [1/m^2] on a grid of ``ds`` [m] (``cum`` unused), or ``CURVATURE_KNOTS`` with
-        ``a, b`` = knot positions [m] and curvatures [1/m] and ``cum`` their running integral
-        [rad] (``ds`` unused); see :func:`curvature_at`.
+    veh, tf, tr, tabf, tabr, eff
+        Plant group: the plant's compiled parameters, vehicle (``V_*``), front and rear tire
+        vectors, front and rear force tables and effects (``X_*``), in the order of
+        ``BicyclePlant.kernel_params()``.
+    curve_source, curve_a, curve_b, curve_ds, curve_cum
+        Curvature group: ``CURVATURE_TABLE`` with ``curve_a, curve_b`` = kappa [1/m] and
+        dkappa/ds [1/m^2] on a grid of ``curve_ds`` [m] (``curve_cum`` unused), or
+        ``CURVATURE_KNOTS`` with ``curve_a, curve_b`` = knot positions [m] and curvatures
+        [1/m] and ``curve_cum`` their running integral [rad] (``curve_ds`` unused); see
+        :func:`curvature_at`.
     s_stop : float
         Stop before a tick that starts at ``s >= s_stop`` [m] (a lane hand-over; inf: never).
     preview_time : float
         The driver's curvature feed-forward is the mean over ``preview_time * vx`` metres
         centred on ``s`` (knots only; 0: the curvature at ``s``).
-    camera : tuple
-        ``(params CAM_*, state CAMS_*, counters CAMC_*, pending PEND_*, noise, drop)``
-        (``Camera.kernel_args()``), updated in place.
-    driver : tuple
-        ``(params DRV_*, integral state, guard GUARD_*)`` (``LaneKeepingDriver.kernel_args()``);
-        the guard's last a_y is updated.
+    cam, cstate, counters, pending, noise, drop
+        Camera group: parameters (``CAM_*``), state (``CAMS_*``), counters (``CAMC_*``),
+        queue of taken frames (``PEND_*``), frame noise and dropouts, in the order of
+        ``Camera.kernel_args()``; updated in place.
+    drv, dstate, guard
+        Driver group: gains (``DRV_*``), integral state (``DS_*``) and a_y guard
+        (``GUARD_*``), in the order of ``LaneKeepingDriver.kernel_args()``; the integral and
+        the guard's last a_y are updated.
     steering_offset, steering, last_delta
         ``steering`` NaN: the driver steers, plus ``steering_offset``; otherwise the full
         road-wheel angle [rad]. ``last_delta``: the steering of the previous tick [rad].
-    lane_change : tuple
-        ``(offset [m], s_start [m], length [m])`` of the lane-change path the driver follows
-        (:func:`lane_change_reference`; ``NO_LANE_CHANGE``: the lane centre).
+    lc_offset, lc_s0, lc_len
+        Lane-change group: offset [m], start [m] and length [m] of the lane-change path the
+        driver follows (:func:`lane_change_reference`; ``NO_LANE_CHANGE``: the lane centre).
     out : ndarray (n_ticks, N_LOG)
         Tick log rows (:data:`LOG_COLUMNS`), row ``j`` at instant ``t_j``.
 
@@ -471,20 +484,17 @@ def advance_ticks(
 
     Notes
     -----
-    The grouped arguments are plain tuples, not named tuples: numba unboxes the plant, camera and
-    driver groups about 2 us faster per call as plain tuples (1.4 vs 3.5 us, of about 85 us per
-    Cornering env step of 50 ticks), and with named tuples built per call by the simulator the
-    Cornering env ran 10.6k instead of 11.6k steps per CPU second (issue 20, measured). Each
-    group is unpacked into named locals on entry. The RK4 midpoint curvature is looked up at ``s + vx dt/2 + ax dt^2/8`` (the exact midpoint
-    under constant ``ax``). The Python loop of the base simulator with a speed profile omits the
-    ``ax dt^2/8`` term (:func:`~tire_learning_env.simulation.advance_ticks_python`,
-    ``midpoint_ax_factor``); with ``ax = 0`` the two agree to the bit.
+    Flat arguments, not tuples: numba unboxes a group packed in a tuple slower than the same
+    values passed one by one (named tuples slower still). With the groups as plain tuples a call
+    cost about 1 us more CPU time to dispatch (4.9 vs 4.0 us, arguments built once; 6.3 vs 5.7 us
+    with the arguments built per call as the simulator does), of about 220 us per Cornering env
+    step of 50 ticks on the machine measured (issue 20 follow-up,
+    ``benchmarks/results/kernel_call_overhead_issue20.json``). The RK4 midpoint curvature is
+    looked up at ``s + vx dt/2 + ax dt^2/8`` (the exact midpoint under constant ``ax``). The
+    Python loop of the base simulator with a speed profile omits the ``ax dt^2/8`` term
+    (:func:`~tire_learning_env.simulation.advance_ticks_python`, ``midpoint_ax_factor``); with
+    ``ax = 0`` the two agree to the bit.
     """
-    veh, tf, tr, tabf, tabr, eff = plant
-    curve_source, curve_a, curve_b, curve_ds, curve_cum = curve
-    cam, cstate, counters, pending, noise, drop = camera
-    drv, dstate, guard = driver
-    lc_offset, lc_s0, lc_len = lane_change
     s = s0
     vx = vx0
     delta = last_delta

@@ -245,11 +245,17 @@ class Simulator:
         full = math.nan if steering is None else float(steering)
         if self.speed_profile is None and hasattr(self.plant, "kernel_params"):
             self.table.cover(self.s + (n_ticks + 2) * self.dt * vx + 1.0)
-            road = (CURVATURE_TABLE, self.table.kappa, self.table.dkappa, self.table.ds, _NO_KNOTS)
+            # flat arguments, each group unpacked in place (advance_ticks, Notes: per-call cost)
             s, _, delta, done, status = advance_ticks(
-                n_ticks, self.dt, self.tick_index, self.plant.state, self.s, vx, ax, self.plant.kernel_params(), road,
-                math.inf, 0.0, self.camera.kernel_args(), self.driver.kernel_args(), offset, full, self.last_delta,
-                NO_LANE_CHANGE, out,
+                n_ticks, self.dt, self.tick_index, self.plant.state, self.s, vx, ax,
+                *self.plant.kernel_params(),
+                CURVATURE_TABLE, self.table.kappa, self.table.dkappa, self.table.ds, _NO_KNOTS,
+                math.inf, 0.0,
+                *self.camera.kernel_args(),
+                *self.driver.kernel_args(),
+                offset, full, self.last_delta,
+                *NO_LANE_CHANGE,
+                out,
             )  # fmt: skip
             compiled = True
         else:

@@ -328,11 +328,17 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
             lc_offset, lc_s0, lc_len = self._lc
             if self._compiled:
                 self.camera.ensure_noise(left)
+                # flat arguments, each group unpacked in place (advance_ticks, Notes: per-call cost)
                 s, vx, delta, done, status = advance_ticks(
-                    left, self.dt, tick0, self.plant.state, self.s, self.vx, self.ax, self.plant.kernel_params(),
-                    (CURVATURE_KNOTS, ks, kv, 0.0, kcum), s_stop, self.curvature_preview,
-                    self.camera.kernel_args(), self.driver.kernel_args(), float(offset), float(steering),
-                    self.last_delta, (float(lc_offset), float(lc_s0), float(lc_len)), chunk,
+                    left, self.dt, tick0, self.plant.state, self.s, self.vx, self.ax,
+                    *self.plant.kernel_params(),
+                    CURVATURE_KNOTS, ks, kv, 0.0, kcum,
+                    s_stop, self.curvature_preview,
+                    *self.camera.kernel_args(),
+                    *self.driver.kernel_args(),
+                    float(offset), float(steering), self.last_delta,
+                    float(lc_offset), float(lc_s0), float(lc_len),
+                    chunk,
                 )  # fmt: skip
             else:
                 preview = self.curvature_preview
