@@ -420,24 +420,11 @@ def run_scenario(sc: dict) -> dict:
 
     out: dict = {"scenario": sc}
     t0 = time.perf_counter()
-    rejected = []
-    while True:
-        try:
-            log, plant, truth_vehicle, nominal, true_curve, k_true = build(sc)
-        except Exception as exc:  # noqa: BLE001
-            out["error"] = {"stage": "simulate", "message": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()[-1500:]}
-            return out
-        ts = truth_summary(log, plant, sc)
-        if ts["valid"] or sc.get("attempt", 0) >= MAX_REDRAWS or "base_seed" not in sc:
-            break
-        # the closed loop (driver on the delayed, noisy camera) lost control: no estimator can be scored
-        # on that drive; redraw the scenario deterministically and keep a record of the rejected one
-        rejected.append({"scenario": sc, "truth_summary": ts})
-        sc = sample_scenario(sc["family"], sc["index"], sc["base_seed"], sc["quick"], sc.get("attempt", 0) + 1)
-        out["scenario"] = sc
-    out["rejected_draws"] = rejected
-    out["simulate_s"] = time.perf_counter() - t0
-    out["truth_summary"] = ts
+    sc, built, ts, rejected = _build_with_redraws(sc, build, lambda b: truth_summary(b[0], b[1], sc), record_error=out)
+    if built is None:  # the build raised: recorded in out
+        return out
+    log, plant, truth_vehicle, nominal, true_curve, k_true = built
+    out.update(scenario=sc, rejected_draws=rejected, simulate_s=time.perf_counter() - t0, truth_summary=ts)
     out["true_stiffness_N_per_rad"] = list(k_true)
     out["nominal_stiffness_N_per_rad"] = [nominal.Cf, nominal.Cr]
     nominal_k = (nominal.Cf, nominal.Cr)
@@ -572,11 +559,41 @@ def _score_core(res, k_true, true_curve, true_slip) -> dict:
     }
 
 
-def _build_with_redraws(sc: dict, build_fn, summary_fn):
-    """Build ``sc``; a drive whose truth lost control is redrawn (attempt 1..MAX_REDRAWS), as ``run_scenario``."""
+def _build_with_redraws(sc: dict, build_fn, summary_fn, record_error: dict | None = None):
+    """Build scenario ``sc``, redrawing a drive whose truth lost control (attempt 1..MAX_REDRAWS).
+
+    The closed loop (driver on the delayed, noisy camera) can lose control: no estimator can be scored
+    on that drive, so the scenario is redrawn deterministically and the rejected draw kept on record.
+
+    Parameters
+    ----------
+    sc : dict
+        The scenario (:func:`sample_scenario`); one without ``base_seed`` is never redrawn.
+    build_fn : callable
+        ``sc -> built``, the simulated drive.
+    summary_fn : callable
+        ``built -> truth summary``, a dict whose ``valid`` is False when the truth lost control.
+    record_error : dict, optional
+        A scenario runner's output: an exception of ``build_fn`` is then not raised but recorded there
+        (``scenario``: the draw that raised, ``error``: stage ``simulate``, message and traceback), and
+        ``built`` and the summary are None.
+
+    Returns
+    -------
+    sc, built, summary, rejected
+        The draw kept (``sc`` or its last redraw), its drive and truth summary, and the rejected draws
+        (``{"scenario", "truth_summary"}`` each).
+    """
     rejected = []
     while True:
-        built = build_fn(sc)
+        try:
+            built = build_fn(sc)
+        except Exception as exc:  # noqa: BLE001
+            if record_error is None:
+                raise
+            record_error["scenario"] = sc
+            record_error["error"] = {"stage": "simulate", "message": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()[-1500:]}
+            return sc, None, None, rejected
         ts = summary_fn(built)
         if ts["valid"] or sc.get("attempt", 0) >= MAX_REDRAWS or "base_seed" not in sc:
             return sc, built, ts, rejected
