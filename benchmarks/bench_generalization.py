@@ -478,7 +478,7 @@ def run_scenario(sc: dict) -> dict:
                             curve=u.axle_force, true_curve=true_curve, stiffness_hat=u.cornering_stiffness(),
                             stiffness_true=k_true, nominal_stiffness=nominal_k)  # fmt: skip
         k = u.cornering_stiffness()
-        lstd = [float(u.std[-1, 4]), float(u.std[-1, 5])]  # std of ln C
+        lstd = [float(u.filter_std[-1, 4]), float(u.filter_std[-1, 5])]  # std of ln C
         band = [[k[j] * math.exp(-2 * lstd[j]), k[j] * math.exp(2 * lstd[j])] for j in range(2)]
         out["ukf"] = {
             "stiffness_error_pct": [m["cornering_stiffness"][a]["error_pct"] for a in AXLES],

@@ -17,18 +17,23 @@ Filter state (8): ``[e1, e1_dot, e2, e2_dot, ln(Cf/Cf0), ln(Cr/Cr0), ln(mu_f), l
 vehicle's). Shape ``Cs`` and curvature ``E`` are fixed (defaults of
 :class:`~tire_learning_env.params.TireParams`).
 
-- Predict (every physics tick, default 1 kHz): scaled unscented transform (Merwe:
+- Predict (from row to row of the log, any spacing): scaled unscented transform (Merwe:
   ``alpha=1, beta=2, kappa=0`` -> all weights >= 0) of a classical RK4 step of the model,
-  inputs ``delta``, ``vx``, ``ax``, ``psi_dot_des``, ``psi_ddot_des`` held over the tick;
-  additive process noise ``Q = diag(q) dt``.
+  inputs ``delta``, ``vx``, ``ax``, ``psi_dot_des = vx kappa`` and ``psi_ddot_des``
+  held over the step; additive process noise ``Q = diag(q) dt``.
 - Update (whenever a camera frame arrived, any rate): ``z = [e1, e2]`` is linear in the
   state, so the unscented update equals the Kalman update, which is used (exact).
 
-Inputs are the ``sensor_log`` rows only (``t, delta, vx, ax, kappa, psi_dot_des,
-psi_ddot_des, e1, e2``; NaN = no frame): never ground truth. Camera latency is not
-compensated. The compiled kernels (:func:`ukf_predict`, :func:`ukf_update`,
-:func:`ukf_run_log`) are the single implementation behind :meth:`JointUKF.predict`,
-:meth:`JointUKF.update` and :meth:`JointUKF.run`.
+Inputs are the log's rows only (``t, delta, vx, kappa, e1, e2``, ``ax`` optional; NaN = no
+frame): never ground truth. ``psi_ddot_des`` is ``ax kappa + vx kappa_rate`` with the backward
+difference of ``kappa``, as the observer has it; a simulator's rows that carry the path's
+``psi_dot_des`` and ``psi_ddot_des`` (:data:`tire_learning_env.simulation.SENSOR_KEYS`) are
+used as they are (``psi_dot_des = vx kappa`` there exactly). Camera latency is not
+compensated. The filter has the verbs of every estimator of the package (``reset``,
+``predict``, ``update``, ``run`` with the observer's argument order) and its result is an
+:class:`~tire_learning_env.observer.EstimateTrace` (:class:`UKFResult`). The compiled
+kernels (:func:`ukf_predict`, :func:`ukf_update`, :func:`ukf_run_rows`) are the single
+implementation behind them; the slip angles are the core's eq. (13).
 """
 
 from __future__ import annotations
@@ -39,191 +44,17 @@ from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from ..observer._kernel import CH_E1, CH_E2, N_CHANNELS
+from ..observer.model import StateIndex, check_sensor_columns
+from ..observer.trace import EstimateTrace
 from ..params import CameraParams, ParameterError, TireParams, VehicleParams
+from ._ukf_kernels import (N_ERR, N_SIGMA, N_X, STATE_NAMES, PARAM_NAMES, U_AX, U_DELTA, U_PDD, U_PDDD, U_VX, UKF_FAMILY,  # noqa: F401
+                           X_E1, X_E1_DOT, X_E2, X_E2_DOT, X_LOG_CF, X_LOG_CR, X_LOG_MU_F, X_LOG_MU_R, ukf_predict,
+                           ukf_run_rows, ukf_update)
 
 __all__ = ["JointUKF", "UKFResult", "run_ukf_baseline", "pacejka_axle_force", "PARAM_NAMES", "STATE_NAMES"]
-
-STATE_NAMES = ("e1", "e1_dot", "e2", "e2_dot", "log_cf", "log_cr", "log_mu_f", "log_mu_r")
-PARAM_NAMES = ("Cf", "Cr", "mu_f", "mu_r")
-# filter state (STATE_NAMES): the error state (dynamics.StateIndex's order), then the log-parameters
-X_E1, X_E1_DOT, X_E2, X_E2_DOT, X_LOG_CF, X_LOG_CR, X_LOG_MU_F, X_LOG_MU_R = range(8)
-N_ERR = 4  # the error-state prefix
-N_X = 8
-N_SIGMA = 2 * N_X + 1
-# constants vector
-K_M, K_IZ, K_LF, K_LR, K_CF0, K_CR0, K_FZF, K_FZR, K_CS, K_E = range(10)
-N_CONST = 10
-_REQUIRED = ("delta", "vx", "psi_dot_des", "psi_ddot_des", "e1", "e2")
-
-
-@njit(cache=True)
-def _axle_force(alpha, stiffness, peak, cs, e):
-    """Pacejka axle force [N] with slope ``stiffness`` [N/rad] at zero slip and peak ``peak`` [N]."""
-    b = stiffness / (cs * peak)
-    x = b * alpha
-    return peak * math.sin(cs * math.atan(x - e * (x - math.atan(x))))
-
-
-@njit(cache=True)
-def _forces(s, delta, vx, pdd, k):
-    """Slips (eq. 13) and axle forces of filter state ``s`` -> ``(af, ar, Ff, Fr)``."""
-    lf, lr = k[K_LF], k[K_LR]
-    vy = s[X_E1_DOT] - vx * s[X_E2]
-    r = s[X_E2_DOT] + pdd
-    af = delta - (vy + lf * r) / vx
-    ar = (lr * r - vy) / vx
-    ff = _axle_force(af, 2.0 * k[K_CF0] * math.exp(s[X_LOG_CF]), math.exp(s[X_LOG_MU_F]) * k[K_FZF], k[K_CS], k[K_E])
-    fr = _axle_force(ar, 2.0 * k[K_CR0] * math.exp(s[X_LOG_CR]), math.exp(s[X_LOG_MU_R]) * k[K_FZR], k[K_CS], k[K_E])
-    return af, ar, ff, fr
-
-
-@njit(cache=True)
-def _rhs(s, delta, vx, ax, pdd, pddd, k, out):
-    _, _, ff, fr = _forces(s, delta, vx, pdd, k)
-    out[X_E1] = s[X_E1_DOT]
-    out[X_E1_DOT] = (ff + fr) / k[K_M] - vx * pdd + ax * s[X_E2]
-    out[X_E2] = s[X_E2_DOT]
-    out[X_E2_DOT] = (k[K_LF] * ff - k[K_LR] * fr) / k[K_IZ] - pddd
-    for i in range(X_LOG_CF, N_X):
-        out[i] = 0.0
-
-
-@njit(cache=True)
-def _rk4(s, dt, delta, vx, ax, pdd, pddd, k, work):
-    """In place RK4 step of the (deterministic part of the) model; ``work`` (5, N_X)."""
-    k1, k2, k3, k4, y = work[0], work[1], work[2], work[3], work[4]
-    _rhs(s, delta, vx, ax, pdd, pddd, k, k1)
-    vm = vx + 0.5 * dt * ax
-    for i in range(N_X):
-        y[i] = s[i] + 0.5 * dt * k1[i]
-    _rhs(y, delta, vm, ax, pdd, pddd, k, k2)
-    for i in range(N_X):
-        y[i] = s[i] + 0.5 * dt * k2[i]
-    _rhs(y, delta, vm, ax, pdd, pddd, k, k3)
-    for i in range(N_X):
-        y[i] = s[i] + dt * k3[i]
-    _rhs(y, delta, vx + dt * ax, ax, pdd, pddd, k, k4)
-    for i in range(N_X):
-        s[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-
-
-@njit(cache=True)
-def _cholesky(P, L):
-    """Lower Cholesky factor of symmetric ``P`` into ``L``; non-positive pivots are floored."""
-    n = P.shape[0]
-    for j in range(n):
-        d = P[j, j]
-        for m in range(j):
-            d -= L[j, m] * L[j, m]
-        if d < 1e-30:
-            d = 1e-30
-        L[j, j] = math.sqrt(d)
-        for i in range(j + 1, n):
-            v = P[i, j]
-            for m in range(j):
-                v -= L[i, m] * L[j, m]
-            L[i, j] = v / L[j, j]
-        for i in range(j):
-            L[i, j] = 0.0
-
-
-@njit(cache=True)
-def ukf_predict(x, P, q, dt, delta, vx, ax, pdd, pddd, k, wm, wc, gamma, sig, work, L):
-    """Unscented predict over ``dt`` [s], in place on ``x`` (N_X,) and ``P`` (N_X, N_X).
-
-    ``q`` (N_X,): process-noise intensities (``Q = diag(q) dt``); ``wm``, ``wc`` the
-    sigma-point weights, ``gamma = sqrt(n + lambda)``; ``sig`` (N_SIGMA, N_X), ``work``
-    (5, N_X) and ``L`` (N_X, N_X) are scratch.
-    """
-    n = N_X
-    _cholesky(P, L)
-    for i in range(n):
-        sig[0, i] = x[i]
-    for j in range(n):
-        for i in range(n):
-            sig[1 + j, i] = x[i] + gamma * L[i, j]
-            sig[1 + n + j, i] = x[i] - gamma * L[i, j]
-    for p in range(2 * n + 1):
-        _rk4(sig[p], dt, delta, vx, ax, pdd, pddd, k, work)
-    for i in range(n):
-        acc = 0.0
-        for p in range(2 * n + 1):
-            acc += wm[p] * sig[p, i]
-        x[i] = acc
-    for i in range(n):
-        for j in range(i, n):
-            acc = 0.0
-            for p in range(2 * n + 1):
-                acc += wc[p] * (sig[p, i] - x[i]) * (sig[p, j] - x[j])
-            P[i, j] = acc
-            P[j, i] = acc
-        P[i, i] += q[i] * dt
-
-
-@njit(cache=True)
-def ukf_update(x, P, z1, z2, r1, r2):
-    """Kalman update with the camera frame ``z = [e1, e2]`` (variances ``r1``, ``r2``), in place."""
-    n = N_X
-    s11 = P[X_E1, X_E1] + r1
-    s12 = P[X_E1, X_E2]
-    s22 = P[X_E2, X_E2] + r2
-    det = s11 * s22 - s12 * s12
-    i11, i12, i22 = s22 / det, -s12 / det, s11 / det
-    y1, y2 = z1 - x[X_E1], z2 - x[X_E2]
-    Kg = np.empty((n, 2))
-    for i in range(n):
-        Kg[i, 0] = P[i, X_E1] * i11 + P[i, X_E2] * i12
-        Kg[i, 1] = P[i, X_E1] * i12 + P[i, X_E2] * i22
-    for i in range(n):
-        x[i] += Kg[i, 0] * y1 + Kg[i, 1] * y2
-    # P <- P - K S K^T = P - K [P(0,:); P(2,:)]
-    row0 = P[X_E1].copy()
-    row2 = P[X_E2].copy()
-    for i in range(n):
-        for j in range(n):
-            P[i, j] -= Kg[i, 0] * row0[j] + Kg[i, 1] * row2[j]
-    for i in range(n):
-        for j in range(i + 1, n):
-            v = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = v
-            P[j, i] = v
-
-
-@njit(cache=True)
-def ukf_run_log(x, P, q, r1, r2, dt, delta, vx, ax, pdd, pddd, e1, e2, k, wm, wc, gamma, out_x, out_pd, out_aux):
-    """Filter a whole sensor log (row ``j`` = instant ``t_j``); fills the posteriors at each ``t_j``.
-
-    Per row: update with the frame delivered at ``t_j`` (if not NaN), record, then predict
-    to ``t_{j+1}`` with the row's inputs. ``out_aux`` (n, 4) = estimated ``af, ar, Ff, Fr``.
-    Returns the number of rows done (< n if the estimate became non-finite).
-    """
-    n = delta.shape[0]
-    sig = np.empty((N_SIGMA, N_X))
-    work = np.empty((5, N_X))
-    L = np.zeros((N_X, N_X))
-    for j in range(n):
-        if e1[j] == e1[j] and e2[j] == e2[j]:
-            ukf_update(x, P, e1[j], e2[j], r1, r2)
-        for i in range(N_X):
-            out_x[j, i] = x[i]
-            out_pd[j, i] = P[i, i]
-        af, ar, ff, fr = _forces(x, delta[j], vx[j], pdd[j], k)
-        out_aux[j, 0] = af
-        out_aux[j, 1] = ar
-        out_aux[j, 2] = ff
-        out_aux[j, 3] = fr
-        ok = True
-        for i in range(N_X):
-            if not math.isfinite(x[i]):
-                ok = False
-        if not ok:
-            return j
-        ukf_predict(x, P, q, dt, delta[j], vx[j], ax[j], pdd[j], pddd[j], k, wm, wc, gamma, sig, work, L)
-    return n
-
 
 def pacejka_axle_force(alpha: ArrayLike, stiffness: float, mu: float, fz: float, shape: float, curvature: float) -> NDArray:
     """The filter's axle curve [N]: Magic Formula with slope ``2 stiffness`` at zero and peak ``mu fz``.
@@ -237,22 +68,27 @@ def pacejka_axle_force(alpha: ArrayLike, stiffness: float, mu: float, fz: float,
 
 
 @dataclass
-class UKFResult:
-    """Per-tick output of :meth:`JointUKF.run` (row ``j`` = posterior at ``t_j``).
+class UKFResult(EstimateTrace):
+    """Per-row output of :meth:`JointUKF.run` (row ``j`` = posterior at ``t_j``): the common
+    :class:`~tire_learning_env.observer.EstimateTrace` of every estimator, plus the filter's
+    parameters.
+
+    The common fields: ``state = [vy, r, e1, e2]`` (``state_names``), its ``std``, the axle
+    ``slip`` (eq. 13) and total ``force`` at the estimated slips, ``force_nonlinear`` (the part
+    beyond the nominal ``2 C alpha``), ``weights`` = the learned log-parameters
+    ``[ln(Cf/Cf0), ln(Cr/Cr0), ln mu_f, ln mu_r]``, the camera ``innovation`` (columns ``e1``,
+    ``e2``) and its ``nis``, ``health`` (all rows ``ok``: the filter has no health test; ``meta``
+    says so), the rows' ``vx`` and ``kappa``.
 
     Attributes
     ----------
-    t : ndarray, shape (n,)
-    xi : ndarray, shape (n, 4)
-        Estimated ``[e1, e1_dot, e2, e2_dot]``.
-    slip : ndarray, shape (n, 2)
-        Estimated axle slips (eq. 13) [rad].
-    force : ndarray, shape (n, 2)
-        Estimated total axle lateral forces at the estimated slips [N].
     params : ndarray, shape (n, 4)
         ``Cf``, ``Cr`` (per tire) [N/rad], ``mu_f``, ``mu_r`` [-] over time.
-    std : ndarray, shape (n, 8)
-        Posterior standard deviations of the filter state (log-parameters for the last 4).
+    filter_std : ndarray, shape (n, 8)
+        Posterior standard deviations of the filter state (:data:`STATE_NAMES`; the
+        log-parameters for the last 4).
+    error_state : ndarray, shape (n, 4)
+        The filter's own ``[e1, e1_dot, e2, e2_dot]`` (:attr:`xi`).
     axle_loads : (float, float)
         Static axle loads of the nominal vehicle [N] (the curve's ``F_z``).
     shape, curvature : float
@@ -261,16 +97,18 @@ class UKFResult:
         Wall time of the run [s].
     """
 
-    t: NDArray
-    xi: NDArray
-    slip: NDArray
-    force: NDArray
-    params: NDArray
-    std: NDArray
-    axle_loads: tuple[float, float]
-    shape: float
-    curvature: float
+    params: NDArray = None
+    filter_std: NDArray = None
+    error_state: NDArray = None
+    axle_loads: tuple = (float("nan"), float("nan"))
+    shape: float = float("nan")
+    curvature: float = float("nan")
     runtime_s: float = float("nan")
+
+    @property
+    def xi(self) -> NDArray:
+        """Estimated ``[e1, e1_dot, e2, e2_dot]`` (the filter's state, exactly)."""
+        return self.error_state
 
     def cornering_stiffness(self, k: int = -1) -> tuple[float, float]:
         """Per-tire cornering stiffness (front, rear) [N/rad] at row ``k`` (default: the end)."""
@@ -308,14 +146,16 @@ class JointUKF:
         Nominal vehicle: ``m``, ``Iz``, ``lf``, ``lr`` and the initial per-tire stiffness
         guesses ``Cf``, ``Cr`` [N/rad] (``Cf0``, ``Cr0``).
     dt : float
-        Predict step [s] (the physics tick of the sensor log).
+        Default predict step [s] (:meth:`predict` without ``dt``; :meth:`run` steps from row
+        to row of the log's ``t``).
     tire : TireParams, optional
         Fixed Pacejka shape ``Cs`` and curvature ``E`` and the initial friction ``mu``.
     measurement_std : (float, float)
         Camera noise standard deviations of ``e1`` [m] and ``e2`` [rad] (``R``). Use
         :meth:`for_camera` to take them from a camera spec (with a floor).
     initial_state_std : (4 floats)
-        Prior std of ``xi`` (the prior mean is zero, or ``xi0`` in :meth:`reset`).
+        Prior std of the error state ``[e1, e1_dot, e2, e2_dot]`` (the prior mean is zero, or the
+        ``state`` given to :meth:`reset`).
     stiffness_std : float
         Prior std of ``ln(C/C0)`` [-] (0.2 ~ +/-20 %).
     mu_std : float
@@ -406,88 +246,190 @@ class JointUKF:
         s1, s2 = camera.noise_std
         return cls(vehicle, measurement_std=(max(s1, floor[0]), max(s2, floor[1])), **kwargs)
 
-    # -- estimator verbs ----------------------------------------------------------------
-    def reset(self, xi0: ArrayLike | None = None) -> "JointUKF":
-        """Back to the prior: ``xi0`` (default 0), nominal stiffness, friction ``tire.mu``."""
-        x = np.zeros(N_X)
-        if xi0 is not None:
-            x[:N_ERR] = np.asarray(xi0, dtype=float).reshape(N_ERR)
-        x[X_LOG_MU_F] = x[X_LOG_MU_R] = math.log(self.tire.mu)
-        self.x_ = x
-        self.P_ = np.diag(np.array([*self.initial_state_std, self.stiffness_std, self.stiffness_std, self.mu_std, self.mu_std]) ** 2)
-        return self
-
-    def predict(self, delta: float, vx: float, psi_dot_des: float, psi_ddot_des: float, ax: float = 0.0, dt: float | None = None) -> "JointUKF":
-        """Unscented predict over ``dt`` (default the filter's) with inputs held [rad, m/s, rad/s, rad/s^2, m/s^2]."""
-        if not vx > 0:
-            raise ValueError(f"vx must be > 0, got {vx!r}")
-        ukf_predict(
-            self.x_, self.P_, self._q, self.dt if dt is None else float(dt), float(delta), float(vx), float(ax),
-            float(psi_dot_des), float(psi_ddot_des), self._k, self._wm, self._wc, self._gamma, self._sig, self._work, self._L,
-        )  # fmt: skip
-        return self
-
-    def update(self, z: ArrayLike) -> "JointUKF":
-        """Correct with a camera frame ``z = [e1 [m], e2 [rad]]``; a NaN frame is skipped."""
-        z = np.asarray(z, dtype=float).reshape(2)
-        if np.all(np.isfinite(z)):
-            r1, r2 = self.measurement_std[0] ** 2, self.measurement_std[1] ** 2
-            ukf_update(self.x_, self.P_, z[0], z[1], r1, r2)
-        return self
-
-    def run(self, sensor_log: Mapping[str, ArrayLike] | Any) -> UKFResult:
-        """Filter a whole sensor log from the prior (see :meth:`reset`); also stored as ``result_``.
+    # -- estimator verbs (the observer's and the linear Kalman filter's signatures) -------------
+    def reset(self, state: ArrayLike | None = None, weights: ArrayLike | None = None) -> "JointUKF":
+        """Back to the prior and to the first row of the next :meth:`run`.
 
         Parameters
         ----------
-        sensor_log : mapping or object with ``.sensors``
-            Per-tick rows ``t, delta, vx, ax, psi_dot_des, psi_ddot_des, e1, e2`` (``ax``
-            optional). Only these keys are read; a log object's ``truth`` is never touched.
+        state : array_like of 4, optional
+            ``[vy [m/s], r [rad/s], e1 [m], e2 [rad]]`` (:class:`~tire_learning_env.observer.model.StateIndex`
+            order, as every estimator), converted to the error state at the vehicle's nominal
+            speed on a straight path; default 0.
+        weights : array_like of 4, optional
+            The learned parameters ``[ln(Cf/Cf0), ln(Cr/Cr0), ln mu_f, ln mu_r]``; default the
+            nominal stiffness and friction ``tire.mu``.
+        """
+        x = np.zeros(N_X)
+        if state is not None:
+            s = np.asarray(state, dtype=float).reshape(4)
+            vx = self.vehicle.vx
+            x[X_E1] = s[StateIndex.E1]
+            x[X_E2] = s[StateIndex.E2]
+            x[X_E1_DOT] = s[StateIndex.VY] + vx * s[StateIndex.E2]  # vy = e1_dot - vx e2
+            x[X_E2_DOT] = s[StateIndex.R]  # r = e2_dot + psi_dot_des, psi_dot_des = 0
+        if weights is None:
+            x[X_LOG_MU_F] = x[X_LOG_MU_R] = math.log(self.tire.mu)
+        else:
+            x[X_LOG_CF:] = np.asarray(weights, dtype=float).reshape(4)
+        self.x_ = x
+        self.P_ = np.diag(np.array([*self.initial_state_std, self.stiffness_std, self.stiffness_std, self.mu_std, self.mu_std]) ** 2)
+        self._u = np.array([0.0, self.vehicle.vx, 0.0, 0.0, 0.0])  # inputs held since the last row (U_*)
+        self._started = False
+        self._path = None  # (t, kappa) of the last row filtered
+        self.t = 0.0
+        return self
+
+    @property
+    def state(self) -> NDArray:
+        """Current ``[vy, r, e1, e2]`` (at the speed and path yaw rate of the last inputs)."""
+        x, u = self.x_, self._u
+        out = np.empty(4)
+        out[StateIndex.VY] = x[X_E1_DOT] - u[U_VX] * x[X_E2]
+        out[StateIndex.R] = x[X_E2_DOT] + u[U_PDD]
+        out[StateIndex.E1] = x[X_E1]
+        out[StateIndex.E2] = x[X_E2]
+        return out
+
+    @property
+    def weights(self) -> NDArray:
+        """Current learned parameters ``[ln(Cf/Cf0), ln(Cr/Cr0), ln mu_f, ln mu_r]``."""
+        return self.x_[X_LOG_CF:].copy()
+
+    def predict(self, dt: float | None = None, delta: float = 0.0, vx: float | None = None, kappa: float = 0.0,
+                ax: float = 0.0, kappa_rate: float = 0.0) -> "JointUKF":  # fmt: skip
+        """Unscented predict over ``dt`` [s] (default the filter's ``dt``) with the inputs held:
+        steering ``delta`` [rad], speed ``vx`` [m/s] (default the vehicle's), path curvature
+        ``kappa`` [1/m] and its rate ``kappa_rate`` [1/(m s)], ``ax`` [m/s^2]. The path's yaw
+        rate is ``psi_dot_des = vx kappa`` and its derivative ``ax kappa + vx kappa_rate``."""
+        dt = self.dt if dt is None else float(dt)
+        vx = self.vehicle.vx if vx is None else float(vx)
+        if not vx > 0:
+            raise ValueError(f"vx must be > 0, got {vx!r}")
+        pdd, pddd = vx * float(kappa), float(ax) * float(kappa) + vx * float(kappa_rate)
+        ukf_predict(
+            self.x_, self.P_, self._q, dt, float(delta), vx, float(ax), pdd, pddd, self._k, self._wm, self._wc,
+            self._gamma, self._sig, self._work, self._L,
+        )  # fmt: skip
+        self._u[:] = (float(delta), vx, float(ax), pdd, pddd)
+        self.t += dt
+        return self
+
+    def update(self, z: ArrayLike | Mapping[str, float], delta: float = 0.0, vx: float | None = None) -> "JointUKF":
+        """Correct with a camera frame now: ``z = [e1 [m], e2 [rad]]``, the four channels
+        ``[e1, e2, a_y, r]`` (the IMU channels are not used: the filter is camera-only) or a
+        mapping with ``e1``, ``e2``; a frame with a NaN channel is skipped. ``delta`` [rad] and
+        ``vx`` [m/s] are the current inputs."""
+        if isinstance(z, Mapping):
+            z1, z2 = float(z.get("e1", np.nan)), float(z.get("e2", np.nan))
+        else:
+            zz = np.asarray(z, dtype=float).reshape(-1)
+            if zz.size not in (2, N_CHANNELS):
+                raise ParameterError(f"z must hold (e1, e2) or (e1, e2, a_y, r), got {zz.size} values")
+            z1, z2 = zz[CH_E1], zz[CH_E2]
+        if math.isfinite(z1) and math.isfinite(z2):
+            ukf_update(self.x_, self.P_, z1, z2, self.measurement_std[0] ** 2, self.measurement_std[1] ** 2)
+        self._u[U_DELTA] = float(delta)
+        self._u[U_VX] = self.vehicle.vx if vx is None else float(vx)
+        self._started = True
+        return self
+
+    def run(self, sensors: Mapping[str, ArrayLike] | Any, predict_last: bool = True) -> UKFResult:
+        """Filter rows, continuing from the current state (the first call after :meth:`reset`
+        starts at the first row, from the prior); the result is also stored as ``result_``.
+
+        Parameters
+        ----------
+        sensors : mapping or object with ``.sensors``
+            Rows ``t, delta, vx, kappa, e1, e2`` (the driving-log format; ``ax`` optional; NaN:
+            no frame). The path's yaw rate is ``vx kappa`` and its derivative ``ax kappa + vx
+            kappa_rate`` with the backward difference of ``kappa`` (what the observer uses);
+            a simulator's rows may carry ``psi_dot_des``, ``psi_ddot_des`` instead of ``kappa``,
+            which are then used. Without ``t`` the rows are ``dt`` apart. Ground truth is refused.
+        predict_last : bool
+            Predict ``dt`` past the last row (where the next call's rows start).
 
         Raises
         ------
         ParameterError
-            A required column is missing or the log is empty.
+            A required column is missing, the columns differ in length, ``t`` is not
+            increasing, or the log is empty.
         FloatingPointError
             The estimate became non-finite (names the time).
         """
-        cols = getattr(sensor_log, "sensors", sensor_log)
+        cols = getattr(sensors, "sensors", sensors)
         if not isinstance(cols, Mapping):
-            raise ParameterError(f"sensor_log must be a mapping of columns, got {type(cols).__name__}")
-        missing = [k for k in _REQUIRED if k not in cols]
-        if missing:
-            raise ParameterError(f"sensor_log is missing column(s) {missing}")
+            raise ParameterError(f"sensors must be a mapping of columns, got {type(cols).__name__}")
+        path = ("psi_dot_des", "psi_ddot_des") if "kappa" not in cols and "psi_dot_des" in cols else ("kappa",)
+        check_sensor_columns(cols, ("delta", "vx", "e1", "e2", *path), "the joint UKF")
         get = lambda key: np.ascontiguousarray(np.asarray(cols[key], dtype=float))  # noqa: E731
         delta, vx = get("delta"), get("vx")
         n = len(delta)
         if n == 0:
-            raise ParameterError("sensor_log is empty")
-        if not np.all(vx > 0):
-            raise ParameterError("sensor_log column vx must be > 0 everywhere")
+            raise ParameterError("the joint UKF got an empty log")
+        t = get("t") if "t" in cols else self.t + np.arange(n) * self.dt
         ax = get("ax") if "ax" in cols else np.zeros(n)
-        t = get("t") if "t" in cols else np.arange(n) * self.dt
-        self.reset()
+        e1, e2 = get("e1"), get("e2")
+        if not all(len(c) == n for c in (t, vx, ax, e1, e2)):
+            raise ParameterError("sensor columns must have equal lengths")
+        if not np.all(vx > 0):
+            raise ParameterError("sensor column vx must be > 0 everywhere")
+        if n > 1 and not np.all(np.diff(t) > 0):
+            raise ParameterError("sensor column t must be strictly increasing")
+        if "psi_dot_des" in cols and "psi_ddot_des" in cols:
+            pdd, pddd = get("psi_dot_des"), get("psi_ddot_des")
+            kappa = get("kappa") if "kappa" in cols else pdd / vx
+        else:
+            kappa = get("kappa")
+            kappa_rate = np.zeros(n)
+            kappa_rate[1:] = np.diff(kappa) / np.diff(t)
+            if self._started and self._path is not None and t[0] > self._path[0]:  # across calls, as in one
+                kappa_rate[0] = (kappa[0] - self._path[1]) / (t[0] - self._path[0])
+            pdd, pddd = vx * kappa, ax * kappa + vx * kappa_rate
         t0 = time.perf_counter()
-        out_x = np.empty((n, N_X))
-        out_pd = np.empty((n, N_X))
-        aux = np.empty((n, 4))
-        done = ukf_run_log(
-            self.x_, self.P_, self._q, self.measurement_std[0] ** 2, self.measurement_std[1] ** 2, self.dt,
-            delta, vx, ax, get("psi_dot_des"), get("psi_ddot_des"), get("e1"), get("e2"),
-            self._k, self._wm, self._wc, self._gamma, out_x, out_pd, aux,
+        out_x, out_pd, out_c12, aux = np.empty((n, N_X)), np.empty((n, N_X)), np.empty(n), np.empty((n, 4))
+        out_nu, out_nis = np.full((n, 2), np.nan), np.full(n, np.nan)
+        t_now = self.t if self._started else float(t[0])
+        dt_last = float(t[-1] - t[-2]) if n > 1 else self.dt
+        done, t_end = ukf_run_rows(
+            self.x_, self.P_, self._q, self.measurement_std[0] ** 2, self.measurement_std[1] ** 2, t, delta, vx, ax,
+            pdd, pddd, e1, e2, self._k, self._wm, self._wc, self._gamma, self._u, t_now, dt_last, bool(predict_last),
+            out_x, out_pd, out_c12, aux, out_nu, out_nis,
         )  # fmt: skip
         if done < n:
             raise FloatingPointError(f"UKF estimate became non-finite at t={t[done]:.4f} s: {dict(zip(STATE_NAMES, out_x[done]))}")
-        params = np.column_stack(
-            [self.vehicle.Cf * np.exp(out_x[:, X_LOG_CF]), self.vehicle.Cr * np.exp(out_x[:, X_LOG_CR]), np.exp(out_x[:, X_LOG_MU_F]),
-             np.exp(out_x[:, X_LOG_MU_R])]
-        )
-        self.result_ = UKFResult(
-            t=t, xi=out_x[:, :N_ERR], slip=aux[:, :2], force=aux[:, 2:], params=params, std=np.sqrt(np.maximum(out_pd, 0.0)),
-            axle_loads=self.vehicle.static_axle_loads, shape=self.tire.shape, curvature=self.tire.curvature,
-            runtime_s=time.perf_counter() - t0,
-        )  # fmt: skip
+        self.t, self._started = float(t_end), True
+        self._path = (float(t[-1]), float(kappa[-1]))  # the backward difference of the next call's first row
+        self.result_ = self._result(t, vx, kappa, pdd, out_x, out_pd, out_c12, aux, out_nu, out_nis, time.perf_counter() - t0)
         return self.result_
+
+    def _result(self, t, vx, kappa, pdd, out_x, out_pd, out_c12, aux, out_nu, out_nis, runtime) -> UKFResult:
+        n = len(t)
+        xi = out_x[:, :N_ERR]
+        state = np.empty((n, 4))
+        state[:, StateIndex.VY] = xi[:, X_E1_DOT] - vx * xi[:, X_E2]
+        state[:, StateIndex.R] = xi[:, X_E2_DOT] + pdd
+        state[:, StateIndex.E1] = xi[:, X_E1]
+        state[:, StateIndex.E2] = xi[:, X_E2]
+        var = np.empty((n, 4))  # vy = e1_dot - vx e2: its variance takes the covariance of e1_dot and e2
+        var[:, StateIndex.VY] = out_pd[:, X_E1_DOT] + vx**2 * out_pd[:, X_E2] - 2.0 * vx * out_c12
+        var[:, StateIndex.R] = out_pd[:, X_E2_DOT]
+        var[:, StateIndex.E1] = out_pd[:, X_E1]
+        var[:, StateIndex.E2] = out_pd[:, X_E2]
+        slip, force = aux[:, :2].copy(), aux[:, 2:].copy()
+        innovation = np.full((n, N_CHANNELS), np.nan)
+        innovation[:, [CH_E1, CH_E2]] = out_nu
+        params = np.column_stack([self.vehicle.Cf * np.exp(out_x[:, X_LOG_CF]), self.vehicle.Cr * np.exp(out_x[:, X_LOG_CR]),
+                                  np.exp(out_x[:, X_LOG_MU_F]), np.exp(out_x[:, X_LOG_MU_R])])  # fmt: skip
+        meta = {"estimator": "joint_ukf", "weights": "ln(Cf/Cf0), ln(Cr/Cr0), ln mu_f, ln mu_r",
+                "health": "not assessed: the joint UKF has no health test (every row reads ok)"}  # fmt: skip
+        return UKFResult(
+            t.copy(), state, slip, force, force - slip * 2.0 * np.array([self.vehicle.Cf, self.vehicle.Cr]),
+            out_x[:, X_LOG_CF:].copy(), np.sqrt(np.maximum(var, 0.0)), np.zeros(n, dtype=np.int8), innovation, out_nis,
+            vx.copy(), kappa.copy(), ("vy", "yaw_rate", "e1", "e2"), meta,
+            params=params, filter_std=np.sqrt(np.maximum(out_pd, 0.0)), error_state=xi.copy(),
+            axle_loads=self.vehicle.static_axle_loads, shape=self.tire.shape, curvature=self.tire.curvature, runtime_s=runtime,
+        )  # fmt: skip
 
     # -- learned tire ---------------------------------------------------------------------
     def cornering_stiffness(self) -> tuple[float, float]:
@@ -525,7 +467,8 @@ def run_ukf_baseline(
     camera : CameraParams
         The camera spec (noise std for ``R``).
     dt : float, optional
-        Tick [s]; default the median spacing of the log's ``t``.
+        The filter's default step [s] (:meth:`JointUKF.predict`; rows without ``t``); default
+        the median spacing of the log's ``t``.
     **kwargs
         Further :class:`JointUKF` settings.
     """
