@@ -84,6 +84,27 @@ def test_examples_shipped_read_alike():
         assert (DATA / f).stat().st_size < 300_000
 
 
+def test_examples_shipped_are_the_simulators(tmp_path):
+    """The shipped MF4, Parquet and channel map are what ``write_example_logs`` writes from the simulator
+    today (so they are the package's own drive, and not stale), and hold that drive's columns in SI."""
+    from tire_learning_env.formats import write_example_logs
+    from tire_learning_env.params import CameraParams
+    from tire_learning_env.simulation import simulate
+
+    write_example_logs(tmp_path)
+    assert (tmp_path / "example_drive.channels.yaml").read_text() == (DATA / "example_drive.channels.yaml").read_text()
+    fresh = {f: read_log(tmp_path / f) for f in ("example_drive.mf4", "example_drive.parquet")}
+    for f, log in fresh.items():
+        _same(read_log(DATA / f), log, rtol=0.0, atol=0.0)
+    # and the simulator's own columns, before any logger unit: km/h, deg, deg/s, g converted back exactly
+    sim = simulate("study1", 30.0, camera=CameraParams.paper_noise(rate=20.0), physics_rate=1000.0, seed=7).to_columns()
+    log = fresh["example_drive.mf4"]
+    idx = np.searchsorted(sim["t"], log.sensors["t"])
+    np.testing.assert_allclose(sim["t"][idx], log.sensors["t"], atol=1e-9)
+    for k in ("vx", "delta", "kappa", "e1", "e2", "yaw_rate", "ay"):
+        np.testing.assert_allclose(log.sensors[k], sim[k][idx], rtol=1e-12, atol=1e-15, equal_nan=True, err_msg=k)
+
+
 def test_resampling_to_the_time_base(tmp_path, columns):
     """A channel logged at another rate is interpolated onto the rows, and the notes say so."""
     from asammdf import MDF, Signal
@@ -183,6 +204,38 @@ def test_same_estimate_as_csv(tmp_path, columns):
     assert all(np.all(np.isfinite(ki)) for ki in k)
     for ki in k[1:]:
         np.testing.assert_allclose(ki, k[0], rtol=1e-6)
+
+
+def test_same_estimate_command_as_csv(tmp_path):
+    """``tire-learning estimate`` as a user runs it (default settings: the offline fit on) gives the same
+    stiffness and 2-sigma band on the shipped MF4 and Parquet examples (docs/fleet.md's command) as on
+    the same data written as CSV and as MCAP (ROS 2 bags: same columns, test_ros2_bag_round_trip)."""
+    from tire_learning_env.cli import main
+
+    example = read_log(DATA / "example_drive.mf4")
+    columns = {**example.sensors, **example.truth}
+    write_log(tmp_path / "d.csv", columns)
+    logs = {"csv": tmp_path / "d.csv", "mf4": DATA / "example_drive.mf4", "parquet": DATA / "example_drive.parquet"}
+    (tmp_path / "mcap").mkdir()
+    logs["mcap"] = tmp_path / "mcap" / "d.mcap"
+    write_logger_log(logs["mcap"], columns, channel_map=tmp_path / "mcap" / "d.channels.yaml")
+    summary = {}
+    for name, log in logs.items():
+        assert main(["estimate", str(log), "--out", str(tmp_path / f"out_{name}"), "--no-progress"]) == 0, name
+        metrics = json.loads((tmp_path / f"out_{name}" / "metrics.json").read_text())
+        summary[name] = metrics["summary"]
+        if name != "csv":  # read through its channel map, not as a CSV
+            assert any("channel map" in n and "found beside the log" in n for n in metrics["log_notes"]), name
+    ref = summary["csv"]
+    keys = [f"stiffness_{a}_{w}" for a in ("front", "rear") for w in ("N_per_rad", "2sigma_N_per_rad")]
+    for k in keys:  # the example is identified: a value and a band on both axles
+        assert ref[k] is not None and np.all(np.isfinite(np.ravel(ref[k]).astype(float))), ref
+    for name, s in summary.items():
+        assert s["verdict"] == ref["verdict"] == "identified" and s["sensors"] == ref["sensors"], name
+        for k in keys:
+            # the CSV keeps 10 significant digits, the logger files float64: the estimates agree far below that
+            np.testing.assert_allclose(np.ravel(s[k]).astype(float), np.ravel(ref[k]).astype(float), rtol=1e-6,
+                                       err_msg=f"{name}: {k}")
 
 
 @pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
