@@ -1,6 +1,7 @@
 """The README's commands, .ci/run and the docs stay consistent."""
 
 import doctest
+import os
 import re
 from pathlib import Path
 
@@ -43,3 +44,37 @@ def test_module_doctests(module):
 
     result = doctest.testmod(importlib.import_module(module), optionflags=doctest.ELLIPSIS)
     assert result.attempted > 0 and result.failed == 0
+
+
+def _extras() -> dict:
+    import tomllib
+
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+
+
+def _name(requirement: str) -> str:
+    return re.split(r"[<>=!~;\[ ]", requirement, maxsplit=1)[0].lower().replace("_", "-")
+
+
+def test_ci_installs_the_fleet_extra():
+    """CI installs ".[test]" (the README's command): it must carry every package of the fleet extra, so
+    the Ray runner, the batch command and the logger formats are tested in CI (issue 19), not skipped."""
+    extras = _extras()
+    assert '".[test]"' in (ROOT / ".ci" / "run").read_text()
+    fleet = {_name(r): r for r in extras["fleet"]}
+    test = {_name(r): r for r in extras["test"]}
+    assert {"ray", "pyarrow", "asammdf", "mcap", "rosbags", "pyyaml"} <= set(fleet)
+    missing = sorted(set(fleet) - set(test))
+    assert not missing, f"the test extra lacks the fleet extra's {missing}"
+    differ = sorted(n for n in fleet if test[n] != fleet[n])
+    assert not differ, f"the test and fleet extras pin {differ} differently"
+
+
+@pytest.mark.skipif(not os.environ.get("CI"), reason="CI only: there the fleet extra must be installed")
+def test_fleet_extra_importable_in_ci():
+    """In CI the fleet tests (tests/test_fleet.py, tests/test_formats.py) skip themselves when a package
+    is missing; this turns that skip into a failure."""
+    import importlib
+
+    for module in ("ray", "pyarrow", "asammdf", "mcap", "rosbags", "yaml"):
+        importlib.import_module(module)
