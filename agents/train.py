@@ -200,7 +200,9 @@ def train(cfg: dict[str, Any], seed: int, out: Path, progress: bool = True, comm
         "final_model": str(out / "final_model.zip"),
         "best_model": str(out / "best_model.zip") if (out / "best_model.zip").exists() else None,
     }
-    (out / "run.json").write_text(json.dumps(run, indent=2, default=str))
+    from tire_learning_env.io import atomic_write_text
+
+    atomic_write_text(out / "run.json", json.dumps(run, indent=2, default=str))  # whole or absent after a kill
     return run
 
 

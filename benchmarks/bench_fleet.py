@@ -216,9 +216,10 @@ def main(argv: list[str] | None = None) -> int:
                       "how busy it was; cores_obtained = the tasks' CPU seconds per wall second: when 2 workers obtain "
                       "little more CPU than 1, the speed-up is capped by the machine, not by the runner (whose cost "
                       "per task is ray_overhead). The 1- and 2-worker runs are measured back to back.")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
     emit(result)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    from tire_learning_env.io import atomic_write_text
+
+    atomic_write_text(args.out, json.dumps(result, indent=2) + "\n")  # a killed run leaves the old file whole
     return 0
 
 
