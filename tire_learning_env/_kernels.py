@@ -95,6 +95,22 @@ NO_LANE_CHANGE = (0.0, 0.0, 1.0)
 
 
 @njit(cache=True)
+def bicycle_slip_angles(vy, r, delta, vx, lf, lr):
+    """Front and rear slip angles [rad] of the bicycle model, eq. (13) in body form::
+
+        alpha_f = delta - (vy + lf r) / vx,      alpha_r = -(vy - lr r) / vx
+
+    ``vy`` [m/s], ``r`` [rad/s] at the centre of gravity, ``delta`` [rad] the front wheel
+    angle of the caller's model (its steering offsets and ratio errors included), ``vx``
+    [m/s] (not floored here: :func:`tire_learning_env.observer._kernel.slip_angles` floors
+    it for the estimators), ``lf``, ``lr`` [m]. The package's one implementation of eq. (13):
+    truth plants, estimators, baselines, discrepancy models and scoring call it (pure Python
+    callers call ``bicycle_slip_angles.py_func``, which also takes numpy arrays).
+    """
+    return delta - (vy + lf * r) / vx, (lr * r - vy) / vx
+
+
+@njit(cache=True)
 def tire_force(alpha: float, tire: np.ndarray, table: np.ndarray) -> float:
     """Axle lateral force [N] of a tire vector (linear, Pacejka or tabulated)."""
     kind = tire[0]
@@ -125,8 +141,7 @@ def bicycle_rhs(e1d, e2, e2d, laf, lar, delta, vx, ax, pdd, pddd, veh, tf, tr, t
     m, Iz, lf, lr = veh[V_M], veh[V_IZ], veh[V_LF], veh[V_LR]
     vy = e1d - vx * e2
     r = e2d + pdd
-    af = delta + eff[X_STEER_OFFSET] - (vy + lf * r) / vx  # eq. (13)
-    ar = (lr * r - vy) / vx
+    af, ar = bicycle_slip_angles(vy, r, delta + eff[X_STEER_OFFSET], vx, lf, lr)  # eq. (13)
     sigma = eff[X_RELAX]
     if sigma > 0.0:
         k = vx / sigma

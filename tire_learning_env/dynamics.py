@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .params import ParameterError, VehicleParams, _Params
-from ._kernels import S_E1, S_E1_DOT, S_E2, S_E2_DOT, bicycle_rhs, bicycle_rk4_step
+from ._kernels import S_E1, S_E1_DOT, S_E2, S_E2_DOT, bicycle_rhs, bicycle_rk4_step, bicycle_slip_angles
 from .tires import TireModel
 
 __all__ = [
@@ -128,12 +128,10 @@ def slip_angles(
         Axle distances [m].
     """
     xi = np.asarray(xi, dtype=float)
-    e1_dot, e2, e2_dot = xi[..., 1], xi[..., 2], xi[..., 3]
     vx = np.asarray(vx, dtype=float)
-    psi_dot_des = np.asarray(psi_dot_des, dtype=float)
-    alpha_f = np.asarray(delta, dtype=float) - (e1_dot - vx * e2 + lf * e2_dot + lf * psi_dot_des) / vx
-    alpha_r = -(e1_dot - vx * e2 - lr * e2_dot - lr * psi_dot_des) / vx
-    return alpha_f, alpha_r
+    vy = xi[..., 1] - vx * xi[..., 2]  # body states from the error state (SPEC section 1)
+    r = xi[..., 3] + np.asarray(psi_dot_des, dtype=float)
+    return bicycle_slip_angles.py_func(vy, r, np.asarray(delta, dtype=float), vx, lf, lr)  # eq. (13), the one implementation
 
 
 def error_state_derivative(

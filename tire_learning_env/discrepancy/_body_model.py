@@ -39,7 +39,7 @@ from numba import njit, prange
 
 from .. import _kernels
 from .._jit_cache import key_on_family
-from .._kernels import V_IZ, V_LF, V_LR, V_M, tire_force
+from .._kernels import V_IZ, V_LF, V_LR, V_M, bicycle_slip_angles, tire_force
 from ._model import (
     CH_YAW,
     OUT_AY,
@@ -160,8 +160,7 @@ def body_rhs(vy, r, laf, lar, dlog, vx, axl, veh, tf, tr, tabf, tabr, th):
         gain_f = GAIN_MIN
     if gain_r < GAIN_MIN:
         gain_r = GAIN_MIN
-    kin_f = -(vy + lf * r) / vx
-    ar = (lr * r - vy) / vx
+    kin_f, ar = bicycle_slip_angles(vy, r, 0.0, vx, lf, lr)  # eq. (13) without the steering (added with its effects)
     cs = th[TH_STEER_COMP]
     sigma = th[TH_RELAX]
     if sigma > RELAX_MIN:
@@ -214,8 +213,7 @@ def simulate_body_rows(x0, j0, j1, t, delta, dslope, vx, ax, veh, tf, tr, tabf, 
     d_start = logged_steer(t[j0] - tau, j0, t, delta, dslope) if tau != 0.0 else delta[j0]
     q = th[TH_STEER_QUICK]
     dr = d_start / STEER_REF
-    laf = d_start * (1.0 + q * dr * dr) + th[TH_STEER_OFFSET] - (vy + lf * r) / v0
-    lar = (lr * r - vy) / v0
+    laf, lar = bicycle_slip_angles(vy, r, d_start * (1.0 + q * dr * dr) + th[TH_STEER_OFFSET], v0, lf, lr)
     b_r, b_a, x_a, s_a = th[TH_YAW_BIAS], th[TH_AY_BIAS], th[TH_ACC_OFFSET], th[TH_AY_SCALE]
     n = j1 - j0 + 1
     for k in range(n):

@@ -28,7 +28,7 @@ from numba import njit, prange
 
 from .. import _kernels
 from .._jit_cache import key_on_family
-from .._kernels import V_HCG, V_IZ, V_LF, V_LR, V_M, V_TRACK, tire_force
+from .._kernels import V_HCG, V_IZ, V_LF, V_LR, V_M, V_TRACK, bicycle_slip_angles, tire_force
 
 # theta layout: one entry per physical parameter of the effect library
 (
@@ -127,8 +127,7 @@ def model_rhs(e1d, e2, e2d, laf, lar, delta, vx, ax, pdd, pddd, veh, tf, tr, tab
     vy = e1d - vx * e2
     r = e2d + pdd
     # eq. (13) + steering offset and steering-ratio error
-    af = delta * (1.0 + th[TH_STEER_RATIO]) + th[TH_STEER_OFFSET] - (vy + lf * r) / vx
-    ar = (lr * r - vy) / vx
+    af, ar = bicycle_slip_angles(vy, r, delta * (1.0 + th[TH_STEER_RATIO]) + th[TH_STEER_OFFSET], vx, lf, lr)
     gain_f = th[TH_SCALE_F] * (1.0 - th[TH_SPEED_COEF] * vx * vx)
     gain_r = th[TH_SCALE_R] * (1.0 - th[TH_SPEED_COEF] * vx * vx)
     sigma = th[TH_RELAX]
@@ -300,8 +299,8 @@ def simulate_rows(x0, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr
     v0 = vx[j0]
     vy0 = e1d - v0 * e2
     r0 = e2d + pdd[j0]
-    laf = delta[j0] * (1.0 + th[TH_STEER_RATIO]) + th[TH_STEER_OFFSET] - (vy0 + veh[V_LF] * r0) / v0
-    lar = (veh[V_LR] * r0 - vy0) / v0
+    laf, lar = bicycle_slip_angles(vy0, r0, delta[j0] * (1.0 + th[TH_STEER_RATIO]) + th[TH_STEER_OFFSET], v0, veh[V_LF],
+                                   veh[V_LR])  # fmt: skip
     m = veh[V_M]
     n = j1 - j0 + 1
     for k in range(n):

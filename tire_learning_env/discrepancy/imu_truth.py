@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..params import ParameterError, TireParams, VehicleParams
+from .._kernels import bicycle_slip_angles
 from ..tires import PacejkaTire
 
 __all__ = ["HIDDEN_IMU_EFFECTS", "parse_imu_effects", "race_drive", "simulate_hidden_imu", "REVS_LIKE_VEHICLE"]
@@ -203,6 +204,7 @@ def simulate_hidden_imu(
     rear = PacejkaTire.for_axle(vehicle, tire, "rear")
     ff, fr = front.force, rear.force
     m, lf, lr = vehicle.m, vehicle.lf, vehicle.lr
+    slip = bicycle_slip_angles.py_func  # eq. (13), the package's one implementation (plain Python in this loop)
     Iz = vehicle.Iz * e["iz_scale"]
     L = vehicle.wheelbase
     kus = m * (lr / (2 * vehicle.Cf) - lf / (2 * vehicle.Cr)) / L
@@ -231,8 +233,7 @@ def simulate_hidden_imu(
             gf *= c
             gr *= c
         gf, gr = max(gf, 0.02), max(gr, 0.02)
-        kin_f = -(vy + lf * r) / v
-        ar = (lr * r - vy) / v
+        kin_f, ar = slip(vy, r, 0.0, v, lf, lr)  # eq. (13) without the steering (added with its effects)
         if e["relax"] > 0:
             Fyf = gf * ff(laf)
             Fyr = gr * fr(lar)
@@ -287,8 +288,7 @@ def simulate_hidden_imu(
         if k == 0:
             delta[0] = L * ay_cmd[0] / vx[0] ** 2 + kus * ay_cmd[0]
             # start in the lag's steady state
-            x[LAG_F] = delta[0] - (x[VY] + lf * x[R]) / vx[0]
-            x[LAG_R] = (lr * x[R] - x[VY]) / vx[0]
+            x[LAG_F], x[LAG_R] = slip(x[VY], x[R], delta[0], vx[0], lf, lr)
         d, af, ar, Fyf, Fyr, ay = rhs(x, t[k], vx[k], vxd[k])
         vy_true[k], r_true[k] = x[VY], x[R]
         ay_true[k], rd_true[k] = ay, d[R]

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import butter, filtfilt
 
+from .._kernels import bicycle_slip_angles
 from ..metrics import AXLES, curve_nrmse, excited_range
 from ..params import VehicleParams
 
@@ -82,8 +83,7 @@ def measured_tire_data(sensors: dict, truth: dict, vehicle: VehicleParams, cutof
         r_f = filtfilt(b, a, r_f)
     r_dot = np.gradient(r_f, t)
     lf, lr, L = vehicle.lf, vehicle.lr, vehicle.wheelbase
-    alpha_f = delta - (vy + lf * r) / vx
-    alpha_r = -(vy - lr * r) / vx
+    alpha_f, alpha_r = bicycle_slip_angles.py_func(vy, r, delta, vx, lf, lr)  # eq. (13) on the arrays
     Fyf = (vehicle.m * lr * ay + vehicle.Iz * r_dot) / (L * np.cos(delta))
     Fyr = (vehicle.m * lf * ay - vehicle.Iz * r_dot) / L
     return MeasuredTireData(t, np.column_stack([alpha_f, alpha_r]), np.column_stack([Fyf, Fyr]), r_dot, cutoff_hz)

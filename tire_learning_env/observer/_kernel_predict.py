@@ -11,6 +11,7 @@ import math
 from numba import njit
 
 from .._jit_cache import key_on_family
+from .._kernels import bicycle_slip_angles
 from ._kernel_types import E1, E2, KERNEL_FAMILY, MODE_CAUSAL, R, V_FLOOR, VY
 
 
@@ -82,9 +83,9 @@ def axle_basis(a, axle, M, w, phi, dphi, wk):
 
 @njit(cache=True)
 def slip_angles(vy, r, delta, vx, lf, lr):
-    """Front and rear slip angles [rad] (eq. 13, body form); ``vx`` floored at ``V_FLOOR``."""
-    v = vx if vx > V_FLOOR else V_FLOOR
-    return delta - (vy + lf * r) / v, -(vy - lr * r) / v
+    """Front and rear slip angles [rad] (eq. 13, :func:`~tire_learning_env._kernels.bicycle_slip_angles`)
+    with ``vx`` floored at ``V_FLOOR`` (the estimators' slips stay finite at standstill)."""
+    return bicycle_slip_angles(vy, r, delta, vx if vx > V_FLOOR else V_FLOOR, lf, lr)
 
 
 @njit(cache=True)

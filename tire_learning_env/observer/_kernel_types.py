@@ -14,9 +14,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-#: The source files of the compiled estimator, callees first.
-KERNEL_FAMILY = tuple(Path(__file__).with_name(name) for name in ("_kernel_types.py", "_kernel_predict.py",
-                                                                 "_kernel_update.py", "_kernel.py"))  # fmt: skip
+#: The source files of the compiled estimator, callees first (``_kernels.py``: eq. 13, :func:`bicycle_slip_angles`).
+KERNEL_FAMILY = (Path(__file__).parents[1] / "_kernels.py",) + tuple(
+    Path(__file__).with_name(name) for name in ("_kernel_types.py", "_kernel_predict.py", "_kernel_update.py", "_kernel.py"))  # fmt: skip
 
 
 # state layout (body states first, so an IMU-only estimator uses the prefix)

@@ -488,10 +488,7 @@ class NeuroAdaptiveObserver:
         vx = self.vehicle.vx if vx is None else float(vx)
         x = self._state.x
         v = self.vehicle
-        vf = max(vx, K.V_FLOOR)
-        af = delta - (x[StateIndex.VY] + v.lf * x[StateIndex.R]) / vf  # eq. (13)
-        ar = -(x[StateIndex.VY] - v.lr * x[StateIndex.R]) / vf
-        slip = np.array([af, ar])
+        slip = np.array(K.slip_angles(float(x[StateIndex.VY]), float(x[StateIndex.R]), float(delta), vx, v.lf, v.lr))  # eq. (13)
         w = self._state.w
         fnl = np.array([float(self.basis.nonlinear_force(slip[i], w[: self.basis.n_weights], i)) for i in (0, 1)])
         if self.model.uses_camera:
