@@ -108,6 +108,29 @@ def test_fallback_only_when_a_sensor_is_absent_from_the_whole_log(log):
     assert fusion_fallback(_without(log.sensors, ("e1", "e2")))[0] == "imu"
 
 
+def test_fused_estimate_keeps_working_through_a_camera_and_an_imu_dropout(log, rows_100hz):
+    """The camera gone for 3 s, later the IMU for 3 s: still the fused design, the sideslip
+    tracked inside both gaps and the stiffness inside its band (measured: sideslip RMSE 0.0047
+    deg, 0.0016 / 0.0081 deg in the gaps, against 0.0028 deg without gaps; stiffness +0.30 /
+    +1.66 % with two-sigma bands of 2.0 / 3.3 %)."""
+    s = {k: v.copy() for k, v in rows_100hz.items()}
+    t = s["t"]
+    gaps = {("e1", "e2"): (t > 3.0) & (t < 6.0), ("ay", "yaw_rate"): (t > 7.0) & (t < 10.0)}
+    for cols, gap in gaps.items():
+        for c in cols:
+            s[c][gap] = np.nan
+    res = estimate(s, _nominal(log), config=ObserverConfig(sensors="both"))
+    assert res.sensors == "both" and "fusion_fallback" not in res.calibration
+    xs = log.truth["true_state"][::10]  # [e1, e1_dot, e2, e2_dot]: vy = e1_dot - vx e2
+    err = np.degrees(res.trace.beta - np.arctan2(xs[:, 1] - s["vx"] * xs[:, 2], s["vx"]))
+    assert np.sqrt(np.mean(err[t > 2.0] ** 2)) < 0.02
+    for gap in gaps.values():
+        assert np.sqrt(np.mean(err[gap] ** 2)) < 0.02
+    k, sd = np.array(res.cornering_stiffness()), np.array(res.cornering_stiffness_std())
+    true_k = np.array([log.vehicle.Cf, log.vehicle.Cr])
+    assert np.all(np.abs(k - true_k) <= 2.0 * sd) and np.all(np.abs(k / true_k - 1) < 0.03)
+
+
 def test_online_fused_design_is_not_the_camera_design(log):
     """Why the on-line fused observer is not claimed equal to the camera one with the IMU absent."""
     v = log.vehicle
