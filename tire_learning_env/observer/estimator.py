@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import Mapping
 
 import numpy as np
@@ -47,7 +48,7 @@ from .model import MeasurementModel, measurement_model
 from .neuro_adaptive import HealthParams, NeuroAdaptiveObserver
 from .offline import hold_fit, refine, select_prior_length
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
-from .sensitivity import steering_hold_sensitivity, yaw_dynamics_check
+from .sensitivity import prefetch_window_baseline, steering_hold_sensitivity, yaw_dynamics_check
 
 # names this module imported before its split (still importable from here)
 from ..params import _Params  # noqa: F401
@@ -317,22 +318,42 @@ def estimate(
         t0 = time.perf_counter()
         # camera logs: a process-noise stage must also leave the camera innovations white (offline.refine)
         white = model.name == "camera"
-        fit = refine(obs, rows, online_w, prior_cov=obs.prior_covariance(offline=True), whiteness=white)
+        # the latency is profiled again below from the refined weights alone: the fit's final recorded pass
+        # (one thread) runs meanwhile (offline.PendingFit; the same fit, bit for bit)
+        again = model.uses_camera and latency_given is None
+        fit = refine(obs, rows, online_w, prior_cov=obs.prior_covariance(offline=True), whiteness=white,
+                     background_final=again)  # fmt: skip
         if model.name == "imu" and np.any(online_w != 0):  # the per-measurement causal law can leave it far off
             fit = _lower_posterior_cost(obs, rows, fit, refine(obs, rows, np.zeros_like(online_w),
                                                                prior_cov=obs.prior_covariance(offline=True)))
             calibration["offline_start"] = fit.start
-        if model.uses_camera and latency_given is None:  # the latency again, from the refined curve
+        if again:  # the latency again, from the refined curve
             first = obs.latency
-            obs.set_force_error(fit.force_error)
-            lat2, lat2_info = _estimate_latency(obs, rows, config, weights=fit.weights, around=first)
+
+            def profile_again():
+                """The second latency profile and its decision; without a refit, the sensitivity checks' window
+                refit from the weights (prefetch_window_baseline). On a thread while this one makes the fit's
+                final recorded pass (offline.PendingFit: the same fit, bit for bit)."""
+                obs.set_force_error(fit.force_error)
+                lat2, lat2_info = _estimate_latency(obs, rows, config, weights=fit.weights, around=first)
+                prof = lat2_info["profile_s_to_cost_per_update"]
+                gain = (prof.get(f"{round(float(first), 4):.4f}", np.inf) - prof[f"{lat2:.4f}"]) * lat2_info["updates"]
+                # refit only when the new latency explains the window significantly better (a chi-square decrease
+                # above 4, two sigma): a 30 min log spent a second whole refinement on 2.5 ms (decrease 1.2)
+                refit = bool(abs(lat2 - first) > 0.002 and gain > 4.0)
+                if not refit:
+                    obs.latency = first
+                    if model.name == "camera":
+                        prefetch_window_baseline(obs, rows, fit)
+                return lat2, lat2_info, gain, refit
+
+            with ThreadPoolExecutor(max_workers=1) as pool:
+                profiled = pool.submit(profile_again)
+                fit.run()  # the final pass, here (the observer is the thread's until it returns)
+                lat2, lat2_info, gain, refit = profiled.result()
             calibration["latency"] = dict(lat2_info, first_profile=calibration["latency"])
-            prof = lat2_info["profile_s_to_cost_per_update"]
-            gain = (prof.get(f"{round(float(first), 4):.4f}", np.inf) - prof[f"{lat2:.4f}"]) * lat2_info["updates"]
             lat2_info["cost_decrease_chi2"] = float(gain)
-            # refit only when the new latency explains the window significantly better (a chi-square decrease
-            # above 4, two sigma): a 30 min log spent a second whole refinement on 2.5 ms (decrease 1.2)
-            if abs(lat2 - first) > 0.002 and gain > 4.0:  # refit from the refined weights, from the stage reached
+            if refit:  # refit from the refined weights, from the stage reached
                 frac = fit.force_error / (0.5 * vehicle.m * 9.81)
                 stages = tuple(f for f in (3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4) if f <= frac * 1.0001) or (frac,)
                 # the stage reached and the next one down (the rest of the continuation was measured to cost
@@ -340,11 +361,11 @@ def estimate(
                 fit = refine(obs, rows, fit.weights, prior_cov=obs.prior_covariance(offline=True),
                              force_errors=stages[:2], whiteness=white)  # fmt: skip
             else:
-                obs.latency = first
                 if abs(lat2 - first) > 1e-9:
                     calibration["latency"]["latency_s"] = float(first)
                     calibration["latency"]["kept_first"] = (f"the refined profile's {lat2 * 1e3:.1f} ms was not "
                                                             "significantly better; the fit kept the first estimate")
+                fit = fit.result()  # the observer holds the fit
                 hold_fit(obs, fit)
         # the prior's length: kept (1 deg unless given), its plausible neighbours' answers in the bands
         fit, calibration["prior_length"] = select_prior_length(obs, rows, fit, choose=False)

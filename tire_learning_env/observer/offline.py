@@ -31,6 +31,7 @@ The *learned slip range* of each axle is where the curve's two-sigma band is wit
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 
@@ -42,7 +43,7 @@ from .passes import _nis_per_dof, _pass, innovation_whiteness, pass_pieces, pass
 from .readout import curve_gradient, stiffness_gradient, stiffness_readout
 from .trace import EstimateTrace
 
-__all__ = ["OfflineFit", "refine", "stiffness_gradient", "curve_gradient", "newey_west_variance", "innovation_whiteness",
+__all__ = ["OfflineFit", "PendingFit", "refine", "stiffness_gradient", "curve_gradient", "newey_west_variance", "innovation_whiteness",
            "hold_fit", "pass_pieces", "pass_threads"]
 
 
@@ -266,7 +267,8 @@ def refine(
     continuation_s: float = 300.0,
     min_decrease: float = 1e-2,
     whiteness: bool = False,
-) -> OfflineFit:
+    background_final: bool = False,
+) -> OfflineFit | PendingFit:
     """Prediction-error refinement of the weights over the whole log (module docstring).
 
     The Kalman predictor needs the process noise (the model's force error), which depends on
@@ -324,6 +326,17 @@ def refine(
         and the weight change is kept in ``fit.mismatch_alternatives`` (the bands add it, as
         :meth:`OfflineFit.prior_sensitivity` does every assumption the log cannot settle); the
         result's ``summary()["model_error_detected"]`` says so.
+    background_final : bool
+        Return a :class:`PendingFit` as soon as the weights are fitted, without the final recorded
+        pass (:func:`_final_fit`, one thread: it records the trace): the caller runs it while a
+        thread does work that needs only the weights and the process noise
+        (:func:`.estimator.estimate` profiles the latency again meanwhile). The fit is the same,
+        bit for bit.
+
+    Returns
+    -------
+    OfflineFit or PendingFit
+        The fit; a :class:`PendingFit` with ``background_final``.
     """
     nw = observer.n_weights
     lo, hi = observer._weight_box()
@@ -414,11 +427,70 @@ def refine(
                               "whole log (model-error sensitivity)")  # fmt: skip
         mismatch = [w_c - w]
     observer.set_force_error(fe)
-    fit = _final_fit(observer, sensors, w, Lam, fit_from, gate, all_costs, iters)
-    fit.force_error = fe
-    fit.mismatch_alternatives = mismatch
-    fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe}
-    return fit
+
+    def final(obs: NeuroAdaptiveObserver) -> OfflineFit:
+        fit = _final_fit(obs, sensors, w, Lam, fit_from, gate, all_costs, iters)
+        fit.force_error = fe
+        fit.mismatch_alternatives = mismatch
+        fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe}
+        return fit
+
+    if not background_final:
+        return final(observer)
+    # the final pass on its own copy of the observer (reset there: its own state; the model and gains
+    # are shared, read only, and replaced, never written, by set_force_error / set_vehicle)
+    worker = copy.copy(observer)
+    observer.reset(weights=w)
+    return PendingFit(observer, lambda: final(worker), w.copy(), fe, Lam)
+
+
+class PendingFit:
+    """A :func:`refine` whose final recorded pass has not run yet (``background_final``).
+
+    The weights, the process noise and the prior precision are known at once. :meth:`run` makes
+    the final pass (on a copy of the observer taken when the weights were fitted, so the caller
+    may meanwhile use the observer on another thread); :meth:`result` returns the
+    :class:`OfflineFit` and leaves the observer holding it (its weights and their covariance, as
+    :func:`refine` leaves it).
+
+    Why: the final pass records the trace, so it runs as one piece on one core; on a 2-core
+    machine the other core is idle for its duration (2-4 s on a 30 min, 100 Hz log) unless the
+    caller has work that needs only the weights (:func:`.estimator.estimate` profiles the latency
+    again and refits the sensitivity checks' window meanwhile, on a thread; the final pass itself
+    runs on the caller's thread, so its large per-row arrays come from the same allocator arena
+    as before: on a worker thread the peak memory of a 30 min, 100 Hz estimate rose from
+    499-501 MB to 513-540 MB).
+
+    Attributes
+    ----------
+    weights : (nw,) the fitted weights
+    force_error : float
+        The chosen stage's force error [N].
+    prior_precision : (nw, nw)
+    """
+
+    def __init__(self, observer: NeuroAdaptiveObserver, final, weights: NDArray, force_error: float,
+                 prior_precision: NDArray) -> None:  # fmt: skip
+        self._observer = observer
+        self._final = final
+        self._fit: OfflineFit | None = None
+        self.weights = weights
+        self.force_error = float(force_error)
+        self.prior_precision = prior_precision
+
+    def run(self) -> OfflineFit:
+        """The final pass (once); the :class:`OfflineFit`. The observer is not touched."""
+        if self._fit is None:
+            self._fit = self._final()
+        return self._fit
+
+    def result(self) -> OfflineFit:
+        """The :class:`OfflineFit` (:meth:`run` if not yet); the observer is left holding it."""
+        fit = self.run()
+        if getattr(self, "_window_baselines", None):  # computed from these weights meanwhile (sensitivity)
+            fit._window_baselines = self._window_baselines
+        hold_fit(self._observer, fit)
+        return fit
 
 
 def hold_fit(observer: NeuroAdaptiveObserver, fit: OfflineFit) -> None:

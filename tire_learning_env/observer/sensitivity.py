@@ -22,7 +22,11 @@ import numpy as np
 from .neuro_adaptive import NeuroAdaptiveObserver
 from .offline import OfflineFit, _continuation_rows, _gauss_newton, hold_fit
 
-__all__ = ["steering_hold_sensitivity", "yaw_dynamics_check"]
+__all__ = ["steering_hold_sensitivity", "yaw_dynamics_check", "prefetch_window_baseline"]
+
+#: The window and the refit of :func:`steering_hold_sensitivity` and :func:`yaw_dynamics_check` (their defaults):
+#: ``(window_s, gate, max_iter, tol, min_decrease)``.
+WINDOW_REFIT = (300.0, 25.0, 2, 1e-3, 1e-2)
 
 
 def _window_baseline(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, window_s: float, gate: float,
@@ -42,6 +46,20 @@ def _window_baseline(observer: NeuroAdaptiveObserver, sensors: dict, fit: Offlin
                                        hi, fit_from, gate, max_iter, tol, min_decrease)  # fmt: skip
         cached[key] = (rows, fit_from, w, float(costs[-1]))
     return cached[key]
+
+
+def prefetch_window_baseline(observer: NeuroAdaptiveObserver, sensors: dict, fit) -> None:
+    """Compute the window baseline that :func:`steering_hold_sensitivity` and :func:`yaw_dynamics_check` start
+    from (with their default window and refit, :data:`WINDOW_REFIT`) ahead of them.
+
+    The baseline needs only the fit's weights and prior precision and the observer's assumptions
+    (process noise, steering hold, yaw inertia), so :func:`.estimator.estimate` computes it while the
+    fit's final recorded pass runs on a thread (``fit``: an :class:`~.offline.PendingFit`, whose
+    :meth:`~.offline.PendingFit.result` carries the cache over to the :class:`~.offline.OfflineFit`).
+    A check run under other assumptions misses the cache and refits, as before.
+    """
+    window_s, gate, max_iter, tol, min_decrease = WINDOW_REFIT
+    _window_baseline(observer, sensors, fit, window_s, gate, max_iter, tol, min_decrease)
 
 
 def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, gate: float = 25.0,
