@@ -15,7 +15,7 @@ from .._kernels import bicycle_slip_angles
 from ._kernel_types import E1, E2, KERNEL_FAMILY, MODE_CAUSAL, R, V_FLOOR, VY
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _bounds_eval(a, axle, lam, ub, nub, spm, spp, ht, slopes):
     """Per distinct bound ``u`` of the axle, with ``x = lam (a - u)``: ``softplus(-x)`` into
     ``spm``, ``softplus(x)`` into ``spp`` and (``slopes``) ``tanh(x / 2)`` into ``ht`` (one
@@ -38,7 +38,7 @@ def _bounds_eval(a, axle, lam, ub, nub, spm, spp, ht, slopes):
             ht[u] = th if x >= 0.0 else -th
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _basis_arrays(a, axle, lam, g, ub, nub, ilo, ihi, off, w, phi, dphi, spm, spp, ht):
     """:func:`axle_basis` on plain arrays (the hot path)."""
     N = off.shape[1]
@@ -60,7 +60,7 @@ def _basis_arrays(a, axle, lam, g, ub, nub, ilo, ihi, off, w, phi, dphi, spm, sp
     return f, k
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _force_arrays(a, axle, lam, g, ub, nub, ilo, ihi, off, w, spm, spp):
     """The learned part of the axle force alone (no activations stored, no slopes)."""
     N = off.shape[1]
@@ -73,7 +73,7 @@ def _force_arrays(a, axle, lam, g, ub, nub, ilo, ihi, off, w, spm, spp):
     return g * f
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def axle_basis(a, axle, M, w, phi, dphi, wk):
     """Activations ``gamma sigma`` (eq. 30) into ``phi[axle N : (axle+1) N]``, their slopes into
     ``dphi``; returns ``(f, df/da)`` of the learned part of the axle force."""
@@ -81,14 +81,14 @@ def axle_basis(a, axle, M, w, phi, dphi, wk):
                          wk.spp, wk.ht)  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def slip_angles(vy, r, delta, vx, lf, lr):
     """Front and rear slip angles [rad] (eq. 13, :func:`~tire_learning_env._kernels.bicycle_slip_angles`)
     with ``vx`` floored at ``V_FLOOR`` (the estimators' slips stay finite at standstill)."""
     return bicycle_slip_angles(vy, r, delta, vx if vx > V_FLOOR else V_FLOOR, lf, lr)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def forces(vy, r, delta, vx, w, M, wk):
     """``(alpha_f, alpha_r, F_f, F_r, f_f, f_r, k_f, k_r)``: slips, total and learned axle
     forces [N] and total slopes [N/rad]; fills ``phi``/``dphi`` (eqs. 13, 14, 29)."""
@@ -98,7 +98,7 @@ def forces(vy, r, delta, vx, w, M, wk):
     return af, ar, M.veh[4] * af + ff, M.veh[5] * ar + fr, ff, fr, M.veh[4] + kf, M.veh[5] + kr
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _rhs_arrays(x, delta, cd, vx, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi, off, phi, dphi, spm, spp, ht, out,
                 full):  # fmt: skip
     """``out = x_dot``; returns the total slopes ``(k_f, k_r)`` at ``x`` (``full``: also the
@@ -126,7 +126,7 @@ def _rhs_arrays(x, delta, cd, vx, kappa, w, veh, nx, lam, gam, ub, nub, ilo, ihi
     return kf, kr
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def matmul_into(A, B, out, n_rows, n_inner, n_cols):
     """``out[:n_rows, :n_cols] = A[:n_rows, :n_inner] @ B[:n_inner, :n_cols]``, each entry summed from 0 in
     ``q`` order (the order the covariance and gain products were written in; inlined, so bit-identical)."""
@@ -138,7 +138,7 @@ def matmul_into(A, B, out, n_rows, n_inner, n_cols):
             out[i, j] = acc
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _jacobian(cd, vx, kf, kr, m, Iz, lf, lr, nx, J):
     """``J = d x_dot / d x`` at total slopes ``k_f``, ``k_r`` (plain arguments: the hot path)."""
     v = vx if vx > V_FLOOR else V_FLOOR
@@ -153,7 +153,7 @@ def _jacobian(cd, vx, kf, kr, m, Iz, lf, lr, nx, J):
         J[E2, R] = 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def predict(st, dt, delta, ddot, vx0, ax, kappa, kdot, M, S, wk):
     """Advance ``x``, ``Upsilon``, ``Sigma`` (and the weight random walk) by ``dt`` [s] with the
     steering ramping with ``ddot`` [rad/s] (0: held), the speed with ``ax`` and the path
@@ -168,7 +168,7 @@ def predict(st, dt, delta, ddot, vx0, ax, kappa, kdot, M, S, wk):
             st.pw[a, a] += S.q_w * dt
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _predict_arrays(dt, delta0, ddot, vx0, ax, kappa0, kdot, x, w, ups, sig, veh, nx, lam, gam, ub, nub, ilo, ihi, off, q_force,
                     h_max, phi, dphi, spm, spp, ht, k1, k2, k3, k4, y, J, Phi, Gm, T1, U):  # fmt: skip
     """:func:`predict` on plain arrays (the hot path: no tuple access inside the loops)."""

@@ -22,7 +22,7 @@ _Z_CHI = 3.719  # standard normal quantile of 1 - 1e-4 (chi-square bound of the 
 
 
 # -- corrections ------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _cell(edges, vx):
     n = edges.shape[0] - 1
     c = 0
@@ -31,7 +31,7 @@ def _cell(edges, vx):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _measurement(group, st, delta, vx, M, S, zk, wk):
     """Innovation, ``H`` (2, nx), ``D_w`` (2, nw), ``Psi`` and present flags of a channel group.
 
@@ -88,7 +88,7 @@ def _measurement(group, st, delta, vx, M, S, zk, wk):
     return nu0, nu1, p0, p1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _inv2(s00, s01, s11):
     det = s00 * s11 - s01 * s01
     if not det > 0.0:
@@ -96,7 +96,7 @@ def _inv2(s00, s01, s11):
     return s11 / det, -s01 / det, s00 / det
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def update(group, st, delta, vx, zk, M, G, S, adapt, accumulate, acc, score, k, wk):
     """Correct with the channel group's measurement at the current instant.
 
@@ -244,7 +244,7 @@ def update(group, st, delta, vx, zk, M, G, S, adapt, accumulate, acc, score, k, 
 
 
 # -- health -----------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _chi2_upper(dof):
     """Wilson-Hilferty upper quantile (1 - 1e-4) of chi-square with ``dof`` degrees of freedom."""
     d = max(dof, 1.0)
@@ -252,7 +252,7 @@ def _chi2_upper(dof):
     return d * (1.0 - c + _Z_CHI * math.sqrt(c)) ** 3
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _save_checkpoint(st, t):
     C = st.ck_t.shape[0]
     h = int(st.hs[HS_CKPT_HEAD])
@@ -266,7 +266,7 @@ def _save_checkpoint(st, t):
     st.hs[HS_LAST_CKPT] = t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _rollback(st, t, S, M):
     """Restore the newest checkpoint at least ``rollback_s`` old (the oldest if none is)."""
     n = int(st.hs[HS_N_CKPT])
@@ -292,7 +292,7 @@ def _rollback(st, t, S, M):
             st.pw[a, b] = st.ck_pw[best, a, b]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _trip(st, t, code, S, M):
     if st.hs[HS_CODE] == HEALTH_OK and S.mode == MODE_CAUSAL and S.adapt:
         _rollback(st, t, S, M)
@@ -306,7 +306,7 @@ def _trip(st, t, code, S, M):
     st.hs[HS_HEAD] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _health_push(st, t, nis, dof, S, M):
     """Add an update's NIS to the window and re-evaluate the flag."""
     W = st.hring.shape[0]
@@ -339,7 +339,7 @@ def _health_push(st, t, nis, dof, S, M):
             st.hs[HS_CODE] = HEALTH_OK
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _health_tick(st, t, S, M):
     """Per-row checks: data gap, divergence, checkpoints."""
     if st.hs[HS_STARTED] == 0.0:
