@@ -340,3 +340,20 @@ def test_pooled_stiffness_per_vehicle():
     assert front["car_b"]["stiffness_N_per_rad"] == 90e3
     assert vehicle_ids([Path("f/car_a/1.csv"), Path("f/car_b/x/2.csv")]) == ["car_a", "car_b/x"]
     assert vehicle_ids([Path("f/1.csv"), Path("f/2.csv")]) == ["1", "2"]  # one folder: a log is a vehicle
+
+
+def test_batch_without_the_fleet_extra(tmp_path, monkeypatch, capsys):
+    """The lean install (no Ray, no pyarrow): batch names the extra and --serial; --serial runs and writes
+    summary.csv and fleet.png, says that summary.parquet is missing, and does not claim to have written it."""
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError, as without the extra
+    monkeypatch.setitem(sys.modules, "pyarrow", None)
+    log = tmp_path / "bad.csv"
+    log.write_text("t,vx,delta,kappa,e1,e2\n0,20,0,0,0,0\n0.1,20,x,0,0,0\n")
+    assert main(["batch", str(log), "--out", str(tmp_path / "a"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "needs Ray" in err and "tire_learning_env[fleet]" in err and "--serial" in err
+    assert main(["batch", str(log), "--out", str(tmp_path / "b"), "--serial", "--no-progress"]) == 1  # the log failed
+    out, err = capsys.readouterr()
+    assert "pyarrow is not installed: no summary.parquet" in err and "failed: bad" in err
+    assert not (tmp_path / "b" / "summary.parquet").exists() and (tmp_path / "b" / "summary.csv").is_file()
+    assert "summary.parquet" not in out and "summary.csv" in out and "fleet.png" in out

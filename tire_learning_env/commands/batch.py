@@ -75,10 +75,13 @@ def run(args: argparse.Namespace) -> int:
             engine="serial" if args.serial else "ray", progress=not args.no_progress, max_retries=args.retries,
         )  # fmt: skip
     except RunnerError as exc:
-        raise ParameterError(str(exc)) from None
+        # the runner speaks of its API (engine='serial'); a CLI user has --serial
+        raise ParameterError(str(exc).replace("engine='serial'", "--serial runs without Ray")) from None
     c = result.counts
+    written = ", ".join(f for f in ("summary.csv", "summary.parquet", "vehicles.csv", "fleet.png")
+                        if (Path(args.batch_out) / f).is_file())  # no summary.parquet without pyarrow
     print(f"wrote {args.batch_out}: {len(result.rows)} logs, {c['ok']} ok, {c['failed']} failed, {c['skipped']} skipped "
-          f"(done before) in {result.wall_s:.1f} s; summary.csv, summary.parquet, fleet.png")  # fmt: skip
+          f"(done before) in {result.wall_s:.1f} s; {written}")  # fmt: skip
     if c["failed"]:
         for row in result.rows:
             if row["status"] == "failed":
