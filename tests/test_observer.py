@@ -487,3 +487,13 @@ def test_stiffness_readout_keeps_the_range_of_a_drive_that_turned_one_way():
     assert info["range_deg"][1] > 0.95, info  # the whole range the drive covered, not the 0.25 deg minimum
     # a straight line with an offset: its slope is the nominal stiffness, whatever the offset
     assert abs((V.Cf + g @ w) / V.Cf - 1.0) < 1e-3
+
+
+def test_a_short_quiet_drive_is_not_identifiable_not_a_linear_algebra_error():
+    """5 s of the default drive with a noise-free camera: the slip range is too narrow for the read-out's
+    polynomial (its normal matrix was singular: LinAlgError from ``estimate``); the verdict says so instead."""
+    log = simulate("study1", 5.0)
+    res = estimate(log.sensors, V)
+    assert res.verdict == "not_identifiable"
+    _, infos = res.stiffness_functionals()
+    assert any("too narrow" in info["method"] for info in infos)

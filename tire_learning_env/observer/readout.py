@@ -62,7 +62,11 @@ def stiffness_readout(observer: NeuroAdaptiveObserver, w: NDArray, slip: NDArray
         wt = dens / max(dens.max(), 1.0) + 0.02
         X = np.vander(grid, degree + 1, increasing=True)
         Xw = X * wt[:, None]
-        Pinv = np.linalg.solve(X.T @ Xw, Xw.T)  # (deg+1, n): weighted least-squares map
+        try:
+            Pinv = np.linalg.solve(X.T @ Xw, Xw.T)  # (deg+1, n): weighted least-squares map
+        except np.linalg.LinAlgError:  # a slip range too narrow for the polynomial (a short, quiet drive)
+            return stiffness_gradient(observer, axle), {"range_deg": [math.degrees(r_lo), math.degrees(r_hi)],
+                                                        "method": "slope at zero (slip range too narrow for a polynomial)"}  # fmt: skip
         G = curve_gradient(observer, grid, axle)
         g_axle = Pinv[1] @ G  # slope at zero = 2C + g_axle^T w
         k = c2 + float(g_axle @ w)
