@@ -2,8 +2,8 @@
 
 numba keys a cached function on its own file only, so an edit to a compiled callee in another
 file would leave the caller's cached machine code in use (:mod:`tire_learning_env._jit_cache`).
-The end-to-end test edits a copy of the package: a callee in ``_kernel_predict.py`` (the slip
-angles) that the measurement of the correction in ``_kernel_update.py`` calls, and
+The end-to-end test edits a copy of the package: a callee in ``_kernels.py`` (the slip
+angles of eq. 13) that the measurement of the correction in ``_kernel_update.py`` calls, and
 checks that a fresh process runs the edited callee. Its control runs the same steps with
 ``key_on_family`` made a no-op and shows the hazard: the process after the edit loads the
 stale caller from the cache and prints the first result again (numba 0.68).
@@ -33,8 +33,8 @@ FAMILIES = {"observer kernel": (FAMILY_MODULES, _kernel_types.KERNEL_FAMILY, 25)
 # cache on a family yet (DEVELOPING.md lists them): an edit to their callees needs a cache clear.
 NOT_YET_KEYED: dict = {}
 
-# The IMU measurement of the correction (``_kernel_update``), which calls the forces and slip
-# angles (``_kernel_predict``), on an observer's own arguments: a cheap cross-file compile.
+# The IMU measurement of the correction (``_kernel_update``), which calls the forces (``_kernel_predict``)
+# and the slip angles (``tire_learning_env._kernels``), on an observer's own arguments: a cheap cross-file compile.
 PROBE = """
 import json
 from types import SimpleNamespace
@@ -92,8 +92,8 @@ def _edit(path: Path, old: str, new: str) -> None:
     path.write_text(text.replace(old, new))
 
 
-SLIP = "return delta - (vy + lf * r) / v, -(vy - lr * r) / v"
-SLIP_EDITED = "return 2.0 * (delta - (vy + lf * r) / v), -(vy - lr * r) / v"  # the front slip doubled
+SLIP = "return delta - (vy + lf * r) / vx, (lr * r - vy) / vx"
+SLIP_EDITED = "return 2.0 * (delta - (vy + lf * r) / vx), (lr * r - vy) / vx"  # the front slip doubled
 
 
 @pytest.mark.slow
@@ -104,7 +104,7 @@ def test_an_edited_callee_in_another_file_is_recompiled(tmp_path, guard):
     if not guard:  # the control: numba's own stamp only
         _edit(root / "tire_learning_env" / "_jit_cache.py", "    digest = family_digest(files)\n",
               "    return 0\n    digest = family_digest(files)\n")
-    callee = root / "tire_learning_env" / "observer" / "_kernel_predict.py"
+    callee = root / "tire_learning_env" / "_kernels.py"  # eq. (13), one file up from the observer's kernels
     first = _probe(root)
     assert list((root / "tire_learning_env" / "observer" / "__pycache__").glob("_kernel_update._measurement-*.nbi")), \
         "the measurement was not cached: the test would not exercise the cache"
