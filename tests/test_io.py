@@ -58,6 +58,13 @@ def test_unknown_columns_are_named_in_a_warning(tmp_path):
     assert "odometer" not in log.sensors and np.isnan(log.sensors["e1"][1])
 
 
+def test_path_curvature_empty_between_frames_is_named_in_a_warning(tmp_path):
+    text = "t,vx,delta,kappa,e1,e2\n0,30,0.01,0.002,0.1,0.01\n0.01,30,0.01,,,\n0.02,30,0.01,0.002,0.1,0.01\n"
+    with pytest.warns(UserWarning, match="'kappa' is empty on 1 of 3 rows.*interpolate"):
+        log = read_log(write(tmp_path, text))
+    assert any("kappa" in note for note in log.notes)
+
+
 def test_imu_only_log_is_recognised(tmp_path):
     text = "t,vx,delta,yaw_rate,ay\n0,30,0,0,0\n0.01,30,0,0,0\n"
     assert read_log(write(tmp_path, text)).kind == "imu"

@@ -59,10 +59,11 @@ def nominal_tires(
         return f, r, {"kind": "pacejka", "mu": tp.mu, "shape": tp.shape, "curvature": tp.curvature}
     if tire == "learned":
         from ..observer import ObserverConfig, estimate
+        from ..observer.rows import fill_path_curvature
 
         s = log.sensors
         t = s["t"]
-        kappa = np.nan_to_num(s["kappa"])
+        kappa = fill_path_curvature(np.asarray(t, dtype=float), np.asarray(s["kappa"], dtype=float))
         pdd = s["vx"] * kappa
         rows = {
             "t": t, "delta": s["delta"], "vx": s["vx"], "psi_dot_des": pdd,

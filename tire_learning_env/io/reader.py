@@ -239,6 +239,13 @@ def finish_log(columns: dict[str, NDArray], source: str, notes: list[str], min_r
         check_log_units(columns, kind, source)
     else:
         notes.append("unit plausibility checks skipped (--no-unit-checks)")
+    if kind == "camera":
+        gaps = int(np.sum(~np.isfinite(columns["kappa"])))
+        if gaps:
+            message = (f"{source}: column 'kappa' is empty on {gaps} of {len(columns['t'])} rows: the estimators "
+                       "interpolate the path curvature in time between its values")
+            warnings.warn(message, stacklevel=3)
+            notes.append(message.split(": ", 1)[1])
     sensor_cols = {k: columns[k] for k in SENSOR_COLUMNS if k in columns}
     if kind == "imu":
         for k in ("e1", "e2", "kappa"):

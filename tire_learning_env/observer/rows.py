@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..params import ParameterError
 from .model import MeasurementModel, check_sensor_columns
 
-__all__ = ["sensor_rows", "CHANNELS"]
+__all__ = ["sensor_rows", "fill_path_curvature", "CHANNELS"]
 
 #: measurement channels in the order of the kernel's ``z`` columns
 CHANNELS = ("e1", "e2", "ay", "yaw_rate")
@@ -22,11 +22,43 @@ class _KernelRows(dict):
     skips the validation (the block law's pieces of one validated call)."""
 
 
+def fill_path_curvature(t: NDArray, kappa: NDArray) -> NDArray:
+    """The path curvature on every row: empty (NaN) cells interpolated linearly in time.
+
+    A camera that reports the lane's curvature with its frames leaves ``kappa`` empty between
+    them; the curvature of a road is smooth, so the rows between two values get the line
+    between them, and the rows before the first (after the last) value hold it.
+
+    Parameters
+    ----------
+    t : ndarray
+        Row times [s], increasing.
+    kappa : ndarray
+        Path curvature [1/m] per row; NaN or inf = no value.
+
+    Returns
+    -------
+    ndarray
+        ``kappa`` with its non-finite cells filled (a copy when any were filled).
+
+    Raises
+    ------
+    ParameterError
+        No row has a finite curvature.
+    """
+    ok = np.isfinite(kappa)
+    if ok.all():
+        return kappa
+    if not ok.any():
+        raise ParameterError("column 'kappa' (path curvature) has no values: the camera model needs it")
+    return np.interp(t, t[ok], kappa[ok])
+
+
 def sensor_rows(sensors: Mapping[str, ArrayLike], model: MeasurementModel) -> dict[str, NDArray]:
     """The kernel's row arrays from sensor columns: ``t, delta, vx, ax, kappa`` and ``z`` (n, 4).
 
-    ``kappa`` comes from ``kappa`` or ``psi_dot_des / vx``; channels the model does not read
-    are NaN. Ground truth (``true_*``) is refused.
+    ``kappa`` comes from ``kappa`` or ``psi_dot_des / vx``; its empty cells are interpolated in
+    time (:func:`fill_path_curvature`); channels the model does not read are NaN. Ground truth (``true_*``) is refused.
     """
     need = ["t", "delta", "vx"]
     if model.uses_camera:
@@ -43,7 +75,7 @@ def sensor_rows(sensors: Mapping[str, ArrayLike], model: MeasurementModel) -> di
     ax = np.where(np.isfinite(ax), ax, 0.0)
     if model.uses_camera:
         kappa = get("kappa") if "kappa" in sensors else get("psi_dot_des") / np.maximum(vx, 1e-3)
-        kappa = np.where(np.isfinite(kappa), kappa, 0.0)
+        kappa = fill_path_curvature(t, kappa)
     else:
         kappa = np.zeros(n)
     z = np.full((n, 4), np.nan)
