@@ -147,6 +147,25 @@ def test_steering_in_degrees_on_a_gentle_drive_is_caught(tmp_path):
         check_log_units(cols, "camera")
 
 
+@pytest.mark.parametrize(
+    "column, message",
+    [
+        ("delta", r"turns against the steering 'delta'.*opposite sign convention"),
+        ("e1", r"e1 changes against vx\*e2.*'e1' and 'e2' have opposite sign conventions"),
+    ],
+)
+def test_a_flipped_sign_convention_is_named(tmp_path, lane_changes, column, message):
+    """A steering or offset positive to the right. The steering check skipped a negative slope (a 120 s
+    single-track log with delta flipped ran to 'not_identifiable ... too little excitation, too much noise or
+    model mismatch'); the offset check called e1 flipped "'e2' looks like degrees"."""
+    cols = dict(lane_changes)
+    cols[column] = -np.asarray(cols[column], float)
+    path = cols_to_csv(tmp_path, cols)
+    with pytest.raises(LogFormatError, match=message) as exc:
+        read_log(path)
+    assert "--no-unit-checks" in str(exc.value) and "degrees" not in str(exc.value)
+
+
 def test_imu_units(tmp_path):
     t = np.arange(0, 60, 0.01)
     vx = 25 + 5 * np.sin(t / 10)

@@ -45,9 +45,10 @@ def check_log_units(columns: Mapping[str, NDArray], kind: str, source: str = "lo
     70 m/s), the steering and the heading error (degrees: ``|delta|`` above 1 rad, ``|e2|``
     above 0.5 rad), and the physics linking the columns, fitted over ~1 s windows where the
     log holds enough excitation: ``e1`` changes by the integral of ``vx e2`` on camera logs
-    (a constant heading bias is allowed for), ``a_y = vx yaw_rate`` on IMU logs, and the
-    heading change against the integral of ``vx delta / L`` (degrees give a wheelbase
-    50x too long).
+    (a constant heading bias is allowed for; a negative slope means ``e1`` and ``e2`` have
+    opposite sign conventions), ``a_y = vx yaw_rate`` on IMU logs, and the heading change
+    against the integral of ``vx delta / L`` (degrees give a wheelbase 50x too long; a
+    negative slope means the opposite steering sign convention).
     """
     t, vx, delta = columns["t"], columns["vx"], columns["delta"]
     dt = np.diff(t)
@@ -90,6 +91,11 @@ def _check_camera_kinematics(columns, source, fix) -> None:
     if r2 < 0.5:
         return
     # (km/h would give k = 0.28, but fast manoeuvres do too (sideslip), so speed is judged by its median only)
+    if k < 0:
+        raise LogFormatError(
+            f"{source}: e1 changes against vx*e2 (slope {k:.3g}, a car gives about +1): 'e1' and 'e2' have opposite "
+            "sign conventions; both must be positive to the left (e1 left of the path, e2 heading to its left): "
+            f"flip one of them{fix}")
     if k < 0.1:
         raise LogFormatError(
             f"{source}: e1 changes {1 / k:.3g}x slower than vx*e2 predicts: 'e2' looks like degrees (must be rad){fix}")
@@ -144,7 +150,14 @@ def _check_steering(columns, kind, source, fix) -> None:
     if float(np.sum(dh**2)) < 0.01:  # too little turning to tell
         return
     inv_l, r2 = _slope(dh, ds)
-    if r2 < 0.5 or inv_l <= 0:
+    if r2 < 0.5:
+        return
+    if inv_l < 0:
+        raise LogFormatError(f"{source}: the car turns against the steering 'delta' (heading change = "
+                             f"{inv_l:.3g} x the integral of vx*delta, a car gives about +1/wheelbase): 'delta' has "
+                             "the opposite sign convention; it must be positive to the left, as kappa, e2 and "
+                             f"yaw_rate{fix}")
+    if inv_l == 0:
         return
     length = 1.0 / inv_l  # the wheelbase plus understeer the log implies [m]
     if length > 100.0:
