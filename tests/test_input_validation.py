@@ -150,7 +150,7 @@ def test_steering_in_degrees_on_a_gentle_drive_is_caught(tmp_path):
 @pytest.mark.parametrize(
     "column, message",
     [
-        ("delta", r"turns against the steering 'delta'.*opposite sign convention"),
+        ("delta", r"turns against the steering 'delta'.*opposite steering sign convention"),
         ("e1", r"e1 changes against vx\*e2.*'e1' and 'e2' have opposite sign conventions"),
     ],
 )

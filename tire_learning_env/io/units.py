@@ -154,8 +154,8 @@ def _check_steering(columns, kind, source, fix) -> None:
         return
     if inv_l < 0:
         raise LogFormatError(f"{source}: the car turns against the steering 'delta' (heading change = "
-                             f"{inv_l:.3g} x the integral of vx*delta, a car gives about +1/wheelbase): 'delta' has "
-                             "the opposite sign convention; it must be positive to the left, as kappa, e2 and "
+                             f"{inv_l:.3g} x the integral of vx*delta, a car gives about +1/wheelbase): opposite "
+                             "steering sign convention; 'delta' must be positive to the left, as kappa, e2 and "
                              f"yaw_rate{fix}")
     if inv_l == 0:
         return
