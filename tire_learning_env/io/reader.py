@@ -239,6 +239,7 @@ def finish_log(columns: dict[str, NDArray], source: str, notes: list[str], min_r
         check_log_units(columns, kind, source)
     else:
         notes.append("unit plausibility checks skipped (--no-unit-checks)")
+    _note_row_gaps(columns["t"], source, notes)
     if kind == "camera":
         gaps = int(np.sum(~np.isfinite(columns["kappa"])))
         if gaps:
@@ -252,6 +253,42 @@ def finish_log(columns: dict[str, NDArray], source: str, notes: list[str], min_r
             sensor_cols.pop(k, None)
     truth = {k: v for k, v in columns.items() if k.startswith("true_")}
     return DrivingLog(sensor_cols, truth, kind, source, [f"read {len(columns['t'])} rows, {kind} log"] + notes)
+
+
+#: a step between rows this many times the median step, and at least ``ROW_GAP_MIN_S``, is a gap in the log
+ROW_GAP_FACTOR = 10.0
+ROW_GAP_MIN_S = 0.5
+
+
+def _note_row_gaps(t: NDArray, source: str, notes: list[str]) -> None:
+    """Name the stretches with no rows at all (a logger pause) in a warning and the notes.
+
+    Nothing is measured there, not even the steering: the estimators predict across such a gap
+    from the rows on either side of it, so a long one costs accuracy, and the user should know
+    it is there.
+
+    Parameters
+    ----------
+    t : ndarray
+        Row times [s], strictly increasing.
+    source : str
+        The log's name for the message.
+    notes : list of str
+        Appended to.
+    """
+    if len(t) < 3:
+        return
+    dt = np.diff(t)
+    limit = max(ROW_GAP_FACTOR * float(np.median(dt)), ROW_GAP_MIN_S)
+    gaps = np.flatnonzero(dt > limit)
+    if not len(gaps):
+        return
+    i = int(gaps[np.argmax(dt[gaps])])
+    message = (f"{source}: the log has no rows over {len(gaps)} stretch(es) longer than {limit:.3g} s (the longest "
+               f"{dt[i]:.3g} s, from t={t[i]:.6g} s): nothing, not even the steering, was logged there, so an "
+               "estimator can only predict across it, at a cost in accuracy (split the log at it if that matters)")
+    warnings.warn(message, stacklevel=4)
+    notes.append(message.split(": ", 1)[1])
 
 
 def _choose_sensors(columns: dict, kind: str, sensors: str, source: str, notes: list[str]) -> str:
