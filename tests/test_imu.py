@@ -4,6 +4,7 @@ blend (never worse than the KF on a noisy-a_y log), log reading and cleaning, th
 import csv
 import functools
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -352,6 +353,20 @@ def test_reader_errors_on_malformed_imu_logs(tmp_path, mutate, message):
         return
     with pytest.raises(LogFormatError, match=message):
         clean_imu_log(read_log(_write(tmp_path, cols)), V)
+
+
+def test_a_log_too_short_for_a_measured_curve_is_scored_null_not_a_crash(tmp_path):
+    """3 s of an IMU log with a reference sideslip: a half of it has no two slip bins of 20 samples.
+    ``estimate`` on such a log (an independent 0.5-3 s single-track log with true_vy) ended in 'ValueError:
+    array of sample points is empty' from the reference scores, after the estimate was done, and wrote
+    nothing; now the curve scores are null and the estimate is written."""
+    out = tmp_path / "out"
+    m = estimate_imu_log(read_log(_write(tmp_path, _imu_columns(n=300))), V, out)
+    scores = m["reference_scores"]["tire_curve_nrmse"]["final_learned_curve"]
+    assert math.isnan(scores["front"]["first_half"]) and math.isnan(scores["rear"]["second_half"])
+    written = json.loads((out / "metrics.json").read_text())["reference_scores"]["tire_curve_nrmse"]
+    assert written["final_learned_curve"]["front"]["first_half"] is None
+    assert m["summary"]["verdict"] in ("identified", "not_identifiable")
 
 
 def test_physically_impossible_ay_becomes_nan_and_is_counted(tmp_path):

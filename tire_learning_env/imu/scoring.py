@@ -122,8 +122,13 @@ class MeasuredCurve:
             self.counts[axle] = int(len(a))
 
     def __call__(self, alpha, axle: str) -> NDArray:
+        """The measured axle force at ``alpha`` [rad]; NaN when fewer than two bins hold ``min_count``
+        samples (a log too short to measure a curve: its NRMSE scores are NaN, written as null)."""
         c, m = self._curves[axle]
-        return np.interp(np.asarray(alpha, dtype=float), c, m)
+        alpha = np.asarray(alpha, dtype=float)
+        if len(c) < 2:
+            return np.full(alpha.shape, np.nan)
+        return np.interp(alpha, c, m)
 
     def nrmse(self, curve, axle: str) -> float:
         """:func:`..metrics.curve_nrmse` of ``curve(alpha, axle)`` against this measured curve."""
