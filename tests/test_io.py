@@ -80,6 +80,18 @@ def test_a_stretch_without_rows_is_named_in_a_warning(tmp_path):
             f"{x:.2f},20,0.001,0,0.01,0.001\n" for x in np.arange(0.0, 20.0, 0.01)), "ok.csv"), check_units=False)
 
 
+def test_short_or_empty_cells_are_read_as_numbers_and_nan(tmp_path):
+    """A column of one-character cells with empty ones ("0" and "") or no value at all was read through a
+    one-character string array that cut "nan" to "n": "column 'kappa', line 2: 'n' is not a number"."""
+    text = "t,vx,delta,kappa,e1,e2\n0,30,0,0,0.1,0.01\n0.01,30,0,,,\n0.02,30,0,0,0.1,0.01\n"
+    with pytest.warns(UserWarning, match="'kappa' is empty on 1 of 3 rows"):
+        log = read_log(write(tmp_path, text))
+    np.testing.assert_array_equal(log.sensors["kappa"], [0.0, np.nan, 0.0])
+    text = "t,vx,delta,kappa,e1,e2,yaw_rate,ay\n0,30,0,0,0.1,,0.01,0.3\n0.01,30,0,0,0.1,,0.01,0.3\n"
+    log = read_log(write(tmp_path, text, "empty_e2.csv"))
+    assert np.isnan(log.sensors["e2"]).all()
+
+
 def test_imu_only_log_is_recognised(tmp_path):
     text = "t,vx,delta,yaw_rate,ay\n0,30,0,0,0\n0.01,30,0,0,0\n"
     assert read_log(write(tmp_path, text)).kind == "imu"

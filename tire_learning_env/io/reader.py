@@ -97,8 +97,9 @@ def _decode(raw: bytes, source: str, notes: list[str]) -> str:
 
 def _to_float(values: list[str], name: str, source: str, first_line: int) -> NDArray:
     """One column as floats; empty cells are NaN; anything else that is not a number raises."""
-    cells = np.array([v.strip() for v in values], dtype=str)
-    cells[cells == ""] = "nan"
+    # empty cells become "nan" before the array is made: a column whose longest cell is shorter than
+    # "nan" ("0", "1", or all empty) would otherwise get a 1- or 2-character dtype that truncates it
+    cells = np.array([v.strip() or "nan" for v in values], dtype=str)
     try:
         return cells.astype(float)
     except ValueError:
@@ -242,7 +243,7 @@ def finish_log(columns: dict[str, NDArray], source: str, notes: list[str], min_r
     _note_row_gaps(columns["t"], source, notes)
     if kind == "camera":
         gaps = int(np.sum(~np.isfinite(columns["kappa"])))
-        if gaps:
+        if 0 < gaps < len(columns["kappa"]):  # (an empty column: the sensor choice names it)
             message = (f"{source}: column 'kappa' is empty on {gaps} of {len(columns['t'])} rows: the estimators "
                        "interpolate the path curvature in time between its values")
             warnings.warn(message, stacklevel=3)
