@@ -92,6 +92,14 @@ def test_short_or_empty_cells_are_read_as_numbers_and_nan(tmp_path):
     assert np.isnan(log.sensors["e2"]).all()
 
 
+def test_column_names_in_another_case_are_named_not_reported_as_no_rows(tmp_path):
+    """'T,VX,DELTA,...' was read as a log without any column and refused as 'the log has no rows'."""
+    text = "T,VX,DELTA,KAPPA,E1,E2\n0,30,0.01,0,0.1,0.01\n0.01,30,0.01,0,0.1,0.01\n"
+    with pytest.warns(UserWarning, match=r"case-sensitive and lower case: 'T' -> 't', 'VX' -> 'vx'"):
+        with pytest.raises(LogFormatError, match="required column 't' is missing"):
+            read_log(write(tmp_path, text))
+
+
 def test_imu_only_log_is_recognised(tmp_path):
     text = "t,vx,delta,yaw_rate,ay\n0,30,0,0,0\n0.01,30,0,0,0\n"
     assert read_log(write(tmp_path, text)).kind == "imu"

@@ -219,7 +219,10 @@ def read_log(path: str | Path, min_rows: int = 2, check_units: bool | None = Non
         raise LogFormatError(f"{source}: the log has no rows")
     unknown = [n for n in names if n not in KNOWN_COLUMNS and not n.startswith("true_")]
     if unknown:
-        warnings.warn(f"{source}: ignoring unknown column(s) {unknown}", stacklevel=2)
+        cased = {n: n.lower() for n in unknown if n.lower() in KNOWN_COLUMNS or n.lower().startswith("true_")}
+        hint = (f" (column names are case-sensitive and lower case: {', '.join(f'{a!r} -> {b!r}' for a, b in cased.items())}?)"
+                if cased else "")  # fmt: skip
+        warnings.warn(f"{source}: ignoring unknown column(s) {unknown}{hint}", stacklevel=2)
     columns = {n: _to_float(cells[n], n, source, first_line) for n in names if n not in unknown}
     return finish_log(columns, source, notes, min_rows, check_units, sensors)
 
@@ -228,7 +231,7 @@ def finish_log(columns: dict[str, NDArray], source: str, notes: list[str], min_r
                sensors: str) -> DrivingLog:  # fmt: skip
     """The checks and the sensor/truth split every reader ends with (CSV here, the logger
     formats in :mod:`tire_learning_env.formats`): columns, sensor set, row count, units."""
-    if not len(columns.get("t", ())):
+    if "t" in columns and not len(columns["t"]):
         raise LogFormatError(f"{source}: the log has no rows")
     kind = _validate(columns, source)
     kind = _choose_sensors(columns, kind, sensors, source, notes)
