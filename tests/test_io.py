@@ -100,6 +100,20 @@ def test_column_names_in_another_case_are_named_not_reported_as_no_rows(tmp_path
             read_log(write(tmp_path, text))
 
 
+def test_an_infinite_measurement_is_read_as_missing_and_named(tmp_path):
+    """'inf' in e1 passed the reader; estimate ran and then failed writing metrics.json ('Out of range float
+    values are not JSON compliant: inf')."""
+    text = "t,vx,delta,kappa,e1,e2\n0,30,0.01,0,0.1,0.01\n0.01,30,0.01,0,inf,0.01\n0.02,30,0.01,0,0.1,-inf\n"
+    with pytest.warns(UserWarning) as record:
+        log = read_log(write(tmp_path, text), check_units=False)
+    messages = " ".join(str(w.message) for w in record)
+    assert "column 'e1' has 1 infinite value(s) (the first at t=0.01 s): read as missing" in messages
+    assert "column 'e2' has 1 infinite value(s) (the first at t=0.02 s)" in messages
+    assert np.isnan(log.sensors["e1"][1]) and np.isnan(log.sensors["e2"][2]) and log.sensors["e1"][0] == 0.1
+    with pytest.raises(LogFormatError, match="column 'vx' has empty or non-finite values"), pytest.warns(UserWarning):
+        read_log(write(tmp_path, text.replace("0.01,30,", "0.01,inf,"), "inf_vx.csv"), check_units=False)
+
+
 def test_imu_only_log_is_recognised(tmp_path):
     text = "t,vx,delta,yaw_rate,ay\n0,30,0,0,0\n0.01,30,0,0,0\n"
     assert read_log(write(tmp_path, text)).kind == "imu"

@@ -233,6 +233,7 @@ def finish_log(columns: dict[str, NDArray], source: str, notes: list[str], min_r
     formats in :mod:`tire_learning_env.formats`): columns, sensor set, row count, units."""
     if "t" in columns and not len(columns["t"]):
         raise LogFormatError(f"{source}: the log has no rows")
+    _infinite_as_missing(columns, source, notes)
     kind = _validate(columns, source)
     kind = _choose_sensors(columns, kind, sensors, source, notes)
     if len(columns["t"]) < min_rows:
@@ -257,6 +258,38 @@ def finish_log(columns: dict[str, NDArray], source: str, notes: list[str], min_r
             sensor_cols.pop(k, None)
     truth = {k: v for k, v in columns.items() if k.startswith("true_")}
     return DrivingLog(sensor_cols, truth, kind, source, [f"read {len(columns['t'])} rows, {kind} log"] + notes)
+
+
+def _infinite_as_missing(columns: dict[str, NDArray], source: str, notes: list[str]) -> None:
+    """Read ``inf``/``-inf`` cells of the measurement and truth columns as missing (NaN), with a warning.
+
+    ``t``, ``vx`` and ``delta`` are left to :func:`_validate`, which refuses them; in every other column an
+    infinite value is no measurement (a logger's overflow), and NaN is what the format has for
+    that. Left as they were, they reached the estimators and the JSON writer, which refused them
+    at the end of the run.
+
+    Parameters
+    ----------
+    columns : dict of str -> ndarray
+        The log's columns, changed in place.
+    source : str
+        The log's name for the message.
+    notes : list of str
+        Appended to.
+    """
+    if "t" not in columns:  # (_validate names it)
+        return
+    t = columns["t"]
+    for name, values in columns.items():
+        if name in ("t", "vx", "delta"):
+            continue
+        bad = np.isinf(values)
+        if bad.any():
+            columns[name] = np.where(bad, np.nan, values)
+            message = (f"{source}: column {name!r} has {int(bad.sum())} infinite value(s) (the first at "
+                       f"t={t[int(np.argmax(bad))]:.6g} s): read as missing")
+            warnings.warn(message, stacklevel=4)
+            notes.append(message.split(": ", 1)[1])
 
 
 #: a step between rows this many times the median step, and at least ``ROW_GAP_MIN_S``, is a gap in the log
