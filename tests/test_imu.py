@@ -16,6 +16,7 @@ from tire_learning_env.imu import (
     ESTIMATE_COLUMNS,
     BlendParams,
     blend_traces,
+    causal_fallback_rows,
     clean_imu_log,
     estimate_imu,
     estimate_imu_log,
@@ -225,6 +226,50 @@ def test_fallback_needs_an_unidentified_curve_and_a_file_inside_its_band():
     # one axle's file outside the band is enough to keep the evidence; no band is not "inside"
     assert not file_not_contradicted(rep((46360.0, 55515.0), (2069.0, 3148.0), (False, False)), (48000.0, 63000.0))["fallback"]
     assert not file_not_contradicted(rep((46360.0, 55515.0), (0.0, 3148.0), (True, False)), (48000.0, 52000.0))["fallback"]
+
+
+def test_causal_fallback_rows_follow_the_last_closed_block():
+    """The causal blend's fallback: each row takes the verdict of the last block closed at or before it."""
+    # block ends 10, 12, 14 s; per tire value and std [N/rad]; the file (48000, 52000)
+    verdicts = {"t": np.array([10.0, 12.0, 14.0]),
+                "value": np.array([[47000.0, 53000.0], [46360.0, 55515.0], [46360.0, 60000.0]]),
+                "std": np.array([[9000.0, 9000.0], [2069.0, 3148.0], [500.0, 600.0]])}  # fmt: skip
+    t = np.array([0.0, 9.99, 10.0, 11.0, 12.0, 13.9, 14.0, 20.0])
+    hold, info = causal_fallback_rows(t, verdicts, (48000.0, 52000.0), 0.1)
+    # before the first block: no curve learned, the file stands; block 1: bands +-38 % (not identified),
+    # file inside; block 2: rear +-11 % (not identified), file 0.8 / 1.1 sigma away (imu_white scenario 2's
+    # offline numbers); block 3: identified and the file 13 sigma off the rear: the evidence decides
+    np.testing.assert_array_equal(hold, [True, True, True, True, True, True, False, False])
+    assert info == {"rows_held_fraction": 6 / 8, "blocks": 3, "blocks_fallback": 2}
+    # not identified but the file outside the band on one axle: the evidence decides
+    v2 = dict(verdicts, value=verdicts["value"][[1]], std=verdicts["std"][[1]], t=verdicts["t"][[1]])
+    hold2, _ = causal_fallback_rows(t, v2, (48000.0, 63000.0), 0.1)
+    np.testing.assert_array_equal(hold2, t < 12.0)
+    # no block closed at all (a log shorter than the settling time): every row held
+    empty = {"t": np.empty(0), "value": np.empty((0, 2)), "std": np.empty((0, 2))}
+    assert causal_fallback_rows(t, empty, (48000.0, 52000.0), 0.1)[0].all()
+    with pytest.raises(ParameterError, match="verdicts"):
+        causal_fallback_rows(t, dict(verdicts, std=verdicts["std"][:2]), (48000.0, 52000.0), 0.1)
+
+
+def test_held_rows_give_the_kf_and_the_evidence_resumes(drive):
+    sensors, _, _ = drive
+    rows = {k: sensors[k] for k in ("t", "delta", "vx", "ay", "yaw_rate")}
+    good = LinearKalmanFilter(V, physics_dt=0.01).run(rows)
+    bad = LinearKalmanFilter(V.replace(Cf=0.6 * V.Cf, Cr=0.6 * V.Cr), physics_dt=0.01).run(rows)
+    t = rows["t"]
+    hold = t < 10.0
+    free = blend_traces(good, bad)  # "observer" = the right file, "linear_kf" = the wrong one
+    held = blend_traces(good, bad, hold=hold)
+    np.testing.assert_array_equal(held.mu[hold], np.tile([0.0, 1.0], (int(hold.sum()), 1)))
+    np.testing.assert_array_equal(held.beta[hold], bad.beta[hold])
+    # after the hold the innovations decide again, from the held probabilities: back to the better mode
+    assert free.mu[-1, 0] > 0.9 and held.mu[-1, 0] > 0.9
+    assert np.all(held.mu[~hold][:5, 0] < 0.5)
+    with pytest.raises(ParameterError, match="causal"):
+        mode_probabilities(t, [good.innovation[:, 2:], bad.innovation[:, 2:]], smooth=True, hold=hold)
+    with pytest.raises(ParameterError, match="one flag per row"):
+        mode_probabilities(t, [good.innovation[:, 2:], bad.innovation[:, 2:]], hold=hold[:-1])
 
 
 def test_blend_without_evidence_keeps_the_prior(drive):

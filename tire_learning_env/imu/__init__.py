@@ -17,7 +17,7 @@ The linear Kalman filter lives in :mod:`tire_learning_env.baselines.kalman` (re-
 """
 
 from ..baselines.kalman import LinearKalmanBaseline, LinearKalmanFilter
-from .blend import Blend, BlendParams, blend_traces, file_not_contradicted, mode_probabilities
+from .blend import Blend, BlendParams, blend_traces, causal_fallback_rows, file_not_contradicted, mode_probabilities
 from .estimate import ESTIMATE_COLUMNS, ImuEstimate, estimate_imu, estimate_imu_log, imu_config, imu_noise_std
 from .logs import CleaningReport, clean_imu_log, read_imu_log
 from .simulate import simulate_imu_drive
@@ -33,6 +33,7 @@ __all__ = [
     "BlendParams",
     "blend_traces",
     "file_not_contradicted",
+    "causal_fallback_rows",
     "mode_probabilities",
     "LinearKalmanFilter",
     "LinearKalmanBaseline",

@@ -77,8 +77,22 @@ against 0.69 deg); where the curve is identified the learned one is the better e
 inside its band (``imu_vibration_bias`` scenario 5: file 1.6 / 1.0 sigma off, observer 0.0076 against
 the KF's 0.0455 deg; the KF has no sensor-offset states). Measured on ``imu_white`` scenario 2 (race car,
 2.2 m/s^2 a_y noise; rear band +-11.3 %, file 0.8 / 1.1 sigma from the learned stiffness):
-0.0175 deg -> 0.0137 against the KF's 0.0160. The causal blend cannot know the verdict of the whole
-log and keeps the evidence.
+0.0175 deg -> 0.0137 against the KF's 0.0160.
+
+Causal fallback (:func:`causal_fallback_rows`, ``BlendParams.causal_fallback``). The causal blend
+cannot know the verdict of the whole log, but it can know the verdict of the rows so far: the
+``"block"`` law closes each 2 s block with a Gauss-Newton step over every block before it, so at each
+block end it holds a fit and its weight covariance from past rows only
+(:meth:`~..observer.NeuroAdaptiveObserver.causal_stiffness`: the slope at zero and its standard
+deviation per tire). Where that verdict is the same fallback (a stiffness not identified, the file
+inside the band on both axles), and before the first block closes, the causal blend gives the
+linear KF alone: a causal pass whose curve has not yet earned trust, on a log that has not shown the
+file wrong, is the file's estimate. (The reported blend keeps the prior mixture instead: its observer
+pass used the whole log and is close to the KF where the curve is not identified, so the mixture beats
+both; a causal pass still learning is not, and a mixture would carry its error.) When a block's
+verdict changes, the evidence recursion resumes from the KF. Measured on ``imu_white`` scenario 2:
+the causal blend 0.0315 deg -> 0.0168 (KF 0.0160; 22 of 23 blocks fall back, the last two do not: the
+block law's rear band narrows to +-15 % with the file 2.0 sigma off, its own curve 18 % high).
 """
 
 from __future__ import annotations
@@ -96,7 +110,8 @@ from ..observer.model import StateIndex
 from ..observer.trace import EstimateTrace
 from ..params import ParameterError, _Params
 
-__all__ = ["BlendParams", "Blend", "mode_probabilities", "blend_traces", "file_not_contradicted", "MODES"]
+__all__ = ["BlendParams", "Blend", "mode_probabilities", "blend_traces", "file_not_contradicted", "causal_fallback_rows",
+           "MODES"]  # fmt: skip
 
 #: mode order of :attr:`Blend.mu`
 MODES = ("observer", "linear_kf")
@@ -127,6 +142,10 @@ class BlendParams(_Params):
         The reported blend keeps the prior mode probabilities when the learned curve is not
         identified and the vehicle file lies inside its two-sigma band on both axles
         (:func:`file_not_contradicted`, module docstring).
+    causal_fallback : bool
+        The causal blend gives the linear KF alone on the rows where the causal verdict, from the
+        ``"block"`` law's fit over the rows so far, is the same fallback: a stiffness not identified
+        and the file inside the band on both axles (:func:`causal_fallback_rows`, module docstring).
     """
 
     time_constant: float = 2.0
@@ -135,6 +154,7 @@ class BlendParams(_Params):
     prior_observer: float = 0.5
     other_causal_law: bool = True
     unidentified_fallback: bool = True
+    causal_fallback: bool = True
 
     _positive: ClassVar[tuple[str, ...]] = ("time_constant", "sojourn")
     _non_negative: ClassVar[tuple[str, ...]] = ("warmup",)
@@ -160,10 +180,12 @@ def _switch(logmu, dt, sojourn):
 
 
 @njit(cache=True)
-def _mode_kernel(t, nu, tau, sojourn, warmup, mu0, out_mu, out_var, out_ll):
+def _mode_kernel(t, nu, tau, sojourn, warmup, mu0, hold, hold_mu, out_mu, out_var, out_ll):
     """``nu`` (M, n, C) innovations (NaN: none); fills ``out_mu`` (n, M), the predictive
     innovation variances ``out_var`` (M, n, C) used at each row and the rows' log likelihoods
-    ``out_ll`` (n, M) (zero where a row is not used)."""
+    ``out_ll`` (n, M) (zero where a row is not used). On rows with ``hold[k]`` the probabilities
+    are ``hold_mu`` (the variances still learn the row's innovations); the recursion goes on from
+    there when the hold ends."""
     M, n, C = nu.shape
     s1 = np.zeros((M, C))  # bias-corrected EW mean of nu^2: sum of weights and weighted sum
     s0 = np.zeros((M, C))
@@ -192,14 +214,19 @@ def _mode_kernel(t, nu, tau, sojourn, warmup, mu0, out_mu, out_var, out_ll):
                 if usable:
                     v = max(v, 1e-300)
                     ll[j] += -0.5 * (nu[j, k, ch] ** 2 / v + math.log(2.0 * math.pi * v))
-        for j in range(M):
-            out_ll[k, j] = ll[j]
-        logmu = logmu + ll
-        logmu -= logmu.max()
-        mu = np.exp(logmu)
-        mu /= mu.sum()
-        for j in range(M):
-            out_mu[k, j] = mu[j]
+        if hold[k]:  # the held probabilities exactly; the recursion goes on from them
+            for j in range(M):
+                logmu[j] = math.log(max(hold_mu[j], 1e-300))
+                out_ll[k, j] = 0.0
+                out_mu[k, j] = hold_mu[j]
+        else:
+            logmu = logmu + ll
+            logmu -= logmu.max()
+            mu = np.exp(logmu)
+            mu /= mu.sum()
+            for j in range(M):
+                out_ll[k, j] = ll[j]
+                out_mu[k, j] = mu[j]
         # then learn this row's innovations (the variance at row k used only rows < k)
         for j in range(M):
             for ch in range(C):
@@ -321,7 +348,8 @@ def _smooth_kernel(t, sojourn, mu_f, ll, out_mu):
 
 
 def mode_probabilities(t: NDArray, innovations: list[NDArray], params: BlendParams | None = None,
-                       prior: NDArray | None = None, smooth: bool = False) -> tuple[NDArray, NDArray]:  # fmt: skip
+                       prior: NDArray | None = None, smooth: bool = False, hold: NDArray | None = None,
+                       hold_mu: NDArray | None = None) -> tuple[NDArray, NDArray]:  # fmt: skip
     """Mode probabilities from per-row innovations (module docstring): causal, or smoothed over the
     whole log.
 
@@ -338,6 +366,11 @@ def mode_probabilities(t: NDArray, innovations: list[NDArray], params: BlendPara
         ``False``: causal (filtered) probabilities, ``p(mode at k | rows <= k)``. ``True``: the
         fixed-interval smoothed ones, ``p(mode at k | all rows)`` (forward-backward recursion of
         the same Markov chain and likelihoods): for an estimate that already used the whole log.
+    hold : array (n,) of bool, optional
+        Causal only: rows whose probabilities are set to ``hold_mu`` instead of the evidence (the
+        causal fallback, :func:`causal_fallback_rows`); the recursion resumes from them.
+    hold_mu : array (M,), optional
+        The probabilities on held rows (default: the last mode, the linear KF, alone).
 
     Returns
     -------
@@ -360,9 +393,17 @@ def mode_probabilities(t: NDArray, innovations: list[NDArray], params: BlendPara
     out_var = np.full((M, n, C), np.nan)
     out_ll = np.zeros((n, M))
     tt = np.ascontiguousarray(t, dtype=float)
+    if hold is not None and smooth:
+        raise ParameterError("hold applies to the causal probabilities (smooth=False)")
     if not smooth:
+        hold_rows = np.zeros(n, dtype=np.bool_) if hold is None else np.ascontiguousarray(hold, dtype=np.bool_)
+        if hold_rows.shape != (n,):
+            raise ParameterError(f"hold must hold one flag per row ({n}), got shape {hold_rows.shape}")
+        h_mu = np.r_[np.zeros(M - 1), 1.0] if hold_mu is None else np.asarray(hold_mu, dtype=float)
+        if h_mu.shape != (M,) or np.any(h_mu < 0) or not h_mu.sum() > 0:
+            raise ParameterError(f"hold_mu must hold {M} non-negative probabilities, got {hold_mu!r}")
         _mode_kernel(tt, nu, float(params.time_constant), float(params.sojourn), float(params.warmup), prior / prior.sum(),
-                     out_mu, out_var, out_ll)  # fmt: skip
+                     hold_rows, h_mu / h_mu.sum(), out_mu, out_var, out_ll)  # fmt: skip
         return out_mu, out_var
     # smoothed: variances from both sides of each row, the filter, then the backward pass
     _two_sided_loglik(tt, nu, float(params.time_constant), float(params.warmup), out_var, out_ll)
@@ -449,9 +490,50 @@ def file_not_contradicted(report: Mapping[str, Mapping], nominal: Sequence[float
     return {"fallback": bool(unident) and inside, "not_identified": unident, "file_sigma": z}
 
 
+def causal_fallback_rows(t: NDArray, verdicts: Mapping[str, NDArray], nominal: Sequence[float],
+                         identifiable_rel_2sigma: float) -> tuple[NDArray, dict]:  # fmt: skip
+    """Rows on which the causal blend falls back to the linear KF (module docstring).
+
+    Parameters
+    ----------
+    t : array (n,)
+        Row times [s].
+    verdicts : mapping
+        The ``"block"`` law's causal stiffness data (:meth:`~..observer.NeuroAdaptiveObserver.causal_stiffness`,
+        ``trace.meta["causal_stiffness"]``): ``t`` (nb,) block ends [s], ``value``, ``std`` (nb, 2) per tire [N/rad].
+    nominal : (float, float)
+        The vehicle file's per-tire stiffness ``(Cf, Cr)`` [N/rad].
+    identifiable_rel_2sigma : float
+        The core's identifiability threshold (``ObserverConfig.identifiable_rel_2sigma``).
+
+    Returns
+    -------
+    hold : array (n,) of bool
+        Row ``k`` is held when the last block that closed at or before ``t[k]`` left a stiffness not
+        identified and the file inside the two-sigma band on both axles (:func:`file_not_contradicted`'s
+        rule on the data so far), and on the rows before the first block closes (no curve learned yet).
+    info : dict
+        ``rows_held_fraction``, ``blocks`` and ``blocks_fallback``.
+    """
+    t = np.asarray(t, dtype=float)
+    tb = np.asarray(verdicts["t"], dtype=float)
+    k = np.asarray(verdicts["value"], dtype=float).reshape(-1, 2)
+    s = np.asarray(verdicts["std"], dtype=float).reshape(-1, 2)
+    c = np.asarray(nominal, dtype=float)
+    if len(tb) != len(k) or len(tb) != len(s) or c.shape != (2,):
+        raise ParameterError("verdicts need t (nb,), value and std (nb, 2); nominal one stiffness per axle")
+    unident = np.any(2.0 * s > identifiable_rel_2sigma * np.abs(k), axis=1)
+    inside = np.all((s > 0.0) & (np.abs(c - k) <= 2.0 * s), axis=1)
+    fb = unident & inside
+    j = np.searchsorted(tb, t, side="right") - 1  # the last block closed at or before each row
+    hold = np.where(j >= 0, fb[np.maximum(j, 0)], True) if len(tb) else np.ones(len(t), dtype=bool)
+    return hold.astype(bool), {"rows_held_fraction": float(np.mean(hold)) if len(t) else 0.0,
+                               "blocks": int(len(tb)), "blocks_fallback": int(np.sum(fb))}  # fmt: skip
+
+
 def blend_traces(observer: EstimateTrace, kalman: EstimateTrace, params: BlendParams | None = None,
                  smooth: bool = False, alternatives: Sequence[tuple[str, EstimateTrace]] = (),
-                 evidence: bool = True) -> Blend:  # fmt: skip
+                 evidence: bool = True, hold: NDArray | None = None) -> Blend:  # fmt: skip
     """Mode probabilities from the IMU innovations of the traces, and the mixture estimate.
 
     Parameters
@@ -470,6 +552,9 @@ def blend_traces(observer: EstimateTrace, kalman: EstimateTrace, params: BlendPa
     evidence : bool
         ``False``: no innovation evidence, the prior mode probabilities on every row (the fallback
         of :func:`file_not_contradicted`).
+    hold : array (n,) of bool, optional
+        Causal blend only: rows on which the linear KF alone is the estimate (the causal fallback,
+        :func:`causal_fallback_rows`); the evidence recursion resumes after them.
     """
     params = params or BlendParams()
     traces = [observer, *(tr for _, tr in alternatives), kalman]
@@ -483,7 +568,8 @@ def blend_traces(observer: EstimateTrace, kalman: EstimateTrace, params: BlendPa
     prior = np.r_[np.full(n_obs, params.prior_observer / n_obs), 1.0 - params.prior_observer]
     imu = [CH_AY, CH_R]
     if evidence:
-        mu, _ = mode_probabilities(observer.t, [tr.innovation[:, imu] for tr in traces], params, prior=prior, smooth=smooth)
+        mu, _ = mode_probabilities(observer.t, [tr.innovation[:, imu] for tr in traces], params, prior=prior, smooth=smooth,
+                                   hold=hold)  # fmt: skip
     else:
         mu = np.tile(prior, (len(observer.t), 1))
     vx = np.maximum(observer.vx, 1e-3)

@@ -49,7 +49,7 @@ from ..observer import EstimateTrace, EstimationResult, ObserverConfig, estimate
 from ..observer.calibration import IMU_NOISE_WINDOW_S, estimate_noise_std
 from ..observer.model import check_sensor_columns
 from ..params import ParameterError, VehicleParams
-from .blend import Blend, BlendParams, blend_traces, file_not_contradicted
+from .blend import Blend, BlendParams, blend_traces, causal_fallback_rows, file_not_contradicted
 from .logs import CleaningReport, clean_imu_log
 
 __all__ = ["ESTIMATE_COLUMNS", "NOISE_WINDOW_S", "ImuEstimate", "imu_config", "imu_noise_std", "estimate_imu",
@@ -138,6 +138,9 @@ class ImuEstimate:
         :func:`~.blend.file_not_contradicted` for the learned curve and the vehicle file, with
         ``applied``: the reported blend kept the prior mode probabilities (curve not identified,
         file inside its band on both axles).
+    online_fallback : dict or None
+        :func:`~.blend.causal_fallback_rows` for the causal blend: ``applied`` (some rows held to the
+        linear KF), ``rows_held_fraction``, ``blocks``, ``blocks_fallback``.
     """
 
     core: EstimationResult
@@ -150,6 +153,7 @@ class ImuEstimate:
     blend_params: BlendParams = BlendParams()
     online_other_law: EstimateTrace | None = None
     blend_fallback: dict | None = None
+    online_fallback: dict | None = None
 
     @property
     def online(self) -> EstimateTrace:
@@ -248,11 +252,20 @@ def estimate_imu(
     fallback = file_not_contradicted(core.stiffness_report(), (vehicle.Cf, vehicle.Cr))
     fallback["applied"] = bool(params.unidentified_fallback and config.offline and fallback["fallback"])
     b_final = blend_traces(core.trace, ktrace, params, smooth=config.offline, evidence=not fallback["applied"])
-    b_online = blend_traces(core.online, ktrace, params, alternatives=(other,) if other else ())
+    # the causal blend's own fallback: the verdict of the "block" law's fit over the rows so far (blend docstring)
+    block_pass = core.online if core.observer.adaptation.causal_update == "block" else (other[1] if other else None)
+    online_fallback: dict = {"applied": False}
+    hold = None
+    if params.causal_fallback and block_pass is not None and "causal_stiffness" in block_pass.meta:
+        hold, online_fallback = causal_fallback_rows(rows["t"], block_pass.meta["causal_stiffness"],
+                                                     (vehicle.Cf, vehicle.Cr), config.identifiable_rel_2sigma)  # fmt: skip
+        online_fallback["applied"] = bool(hold.any())
+    b_online = blend_traces(core.online, ktrace, params, alternatives=(other,) if other else (), hold=hold)
     runtime["blend"] = time.perf_counter() - t0
     runtime["total"] = time.perf_counter() - t_all
     return ImuEstimate(core, ktrace, kf, b_final, b_online, noise_info, runtime, params,
-                       online_other_law=other[1] if other else None, blend_fallback=fallback)  # fmt: skip
+                       online_other_law=other[1] if other else None, blend_fallback=fallback,
+                       online_fallback=online_fallback)  # fmt: skip
 
 
 # -- the estimate command on an IMU log -------------------------------------------------------------
@@ -425,6 +438,7 @@ def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: Obser
             "reported": result.blend.summary(),
             "online": result.blend_online.summary(),
             "reported_fallback": result.blend_fallback,
+            "causal_fallback": result.online_fallback,
         },
         "runtime_s": {
             "observer": {k: float(v) for k, v in obs_rt.items()},

@@ -362,6 +362,7 @@ class NeuroAdaptiveObserver:
                 "A": Lam, "c": Lam @ self.initial_weights, "w_run": w,
                 "acc": K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4), np.empty((0, 2))),
                 "t_end": None, "healthy": True, "blocks": 0, "used": 0,
+                "verdicts": [],  # per closed block: (t_end, stiffness (2), std (2)), the causal verdict's data
             }  # fmt: skip
             self._state.pw[:] = P0
         return self._block
@@ -398,10 +399,35 @@ class NeuroAdaptiveObserver:
                 self._adapt_force_error(min(self.force_error * 2.0, hi_fe))
             elif nis < 1.0:
                 self._adapt_force_error(max(self.force_error / 1.5, lo_fe))
+        b["verdicts"].append(self._causal_stiffness(b["t_end"]))
         b["w_run"] = self._state.w.copy()
         b["acc"] = K.Accumulator(np.zeros_like(acc.hess), np.zeros_like(acc.grad), np.zeros(4), np.empty((0, 2)))
         b["healthy"] = True
         b["t_end"] += self.adaptation.block_s
+
+    def _causal_stiffness(self, t_end: float) -> tuple:
+        """``(t_end, (Cf, Cr), (std_f, std_r))`` at a block's end: the per-tire stiffness of the curve
+        the block law holds from then on (slope at zero, :func:`.readout.stiffness_gradient`: the
+        whole-log read-out needs the slip of the whole log) and its standard deviation from the fit's
+        weight covariance over all blocks so far (the data of rows before ``t_end`` only)."""
+        from .readout import stiffness_gradient  # readout imports this module
+
+        b = self._block
+        if "g_stiffness" not in b:
+            b["g_stiffness"] = np.vstack([stiffness_gradient(self, i) for i in (0, 1)])
+        G = b["g_stiffness"]
+        k = np.array([self.vehicle.Cf, self.vehicle.Cr]) + G @ self._state.w
+        s = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", G, self._state.pw, G), 0.0))
+        return float(t_end), (float(k[0]), float(k[1])), (float(s[0]), float(s[1]))
+
+    def causal_stiffness(self) -> dict:
+        """The block law's causal stiffness verdict data, one entry per closed block
+        (:meth:`_causal_stiffness`): ``t`` (nb,) block ends [s], ``value`` and ``std`` (nb, 2) per
+        tire [N/rad]. Empty arrays before the first block closes or under the ``"rls"`` law."""
+        v = (self._block or {}).get("verdicts", [])
+        return {"t": np.array([x[0] for x in v], dtype=float),
+                "value": np.array([x[1] for x in v], dtype=float).reshape(-1, 2),
+                "std": np.array([x[2] for x in v], dtype=float).reshape(-1, 2)}  # fmt: skip
 
     def _run_blocks(self, sensors: Mapping[str, ArrayLike], predict_last: bool, compute_std: bool,
                     store_weights: bool) -> EstimateTrace:  # fmt: skip
@@ -450,13 +476,15 @@ class NeuroAdaptiveObserver:
         weights = np.repeat(np.vstack(held), lengths, axis=0) if store_weights else np.empty((0, self.n_weights))
         if len(pieces) == 1:
             pieces[0].weights = weights
+            pieces[0].meta["causal_stiffness"] = self.causal_stiffness()
             return pieces[0]
         first = pieces[0]
         arrays = {f: np.concatenate([getattr(p, f) for p in pieces]) for f in
                   ("t", "state", "slip", "force", "force_nonlinear", "std", "health", "innovation", "nis",
                    "vx", "kappa")}  # fmt: skip
         del pieces
-        return EstimateTrace(**arrays, weights=weights, state_names=first.state_names, meta=dict(first.meta))
+        meta = dict(first.meta, causal_stiffness=self.causal_stiffness())  # the blocks' verdict data (causal)
+        return EstimateTrace(**arrays, weights=weights, state_names=first.state_names, meta=meta)
 
     def predict(self, dt: float | None = None, delta: float = 0.0, vx: float | None = None, kappa: float = 0.0,
                 ax: float = 0.0, kappa_rate: float = 0.0, steering_rate: float = 0.0) -> "NeuroAdaptiveObserver":  # fmt: skip
