@@ -50,7 +50,7 @@ from ..observer.calibration import IMU_NOISE_WINDOW_S, estimate_noise_std
 from ..observer.model import check_sensor_columns
 from ..params import ParameterError, VehicleParams
 from .blend import Blend, BlendParams, blend_traces, causal_fallback_rows, file_not_contradicted
-from .logs import CleaningReport, clean_imu_log
+from .logs import MIN_SPEED, CleaningReport, clean_imu_log
 
 __all__ = ["ESTIMATE_COLUMNS", "NOISE_WINDOW_S", "ImuEstimate", "imu_config", "imu_noise_std", "estimate_imu",
            "estimate_imu_log"]  # fmt: skip
@@ -244,7 +244,10 @@ def estimate_imu(
     dt = float(np.median(np.diff(rows["t"])))
     t0 = time.perf_counter()
     kf = LinearKalmanFilter(vehicle, noise_std=noise_used, physics_dt=dt)
-    ktrace = kf.run(rows)
+    # the KF's own speed floor (1 m/s) makes its forward-Euler step unstable at standstill for a stiff car or a
+    # slow log (1 - dt (Cf + Cr) / (m v) < -1); the observer's floor V_FLOOR keeps it stable where the IMU
+    # samples are not used anyway (logs.MIN_SPEED)
+    ktrace = kf.run(dict(rows, vx=np.maximum(rows["vx"], MIN_SPEED)))
     runtime["linear_kf"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     # the refined pass used the whole log: its mode probabilities may too (smoothed); the causal one stays causal

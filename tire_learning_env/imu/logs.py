@@ -7,14 +7,25 @@ appended to ``log.notes``):
 
 Errors (:class:`..io.LogFormatError`, naming the problem)
     - no ``yaw_rate`` or ``ay`` column;
-    - sampling that is not (nearly) uniform: a gap or jitter over 25 % of the median step
-      (the gains are certified for one step; split or resample the log);
+    - a stretch without rows (:func:`..io.row_gaps`: a step over 10x the median and
+      over 0.5 s, the reader's gap): nothing was logged there, not even the steering;
     - ``yaw_rate`` that cannot be in rad/s (``|r| > 5 rad/s``: deg/s?);
     - ``ay`` that cannot be in m/s^2 or has the wrong sign: while cornering, ``a_y`` must
       follow ``vx r`` (slope 0.5-2; a slope near 0.1 means g units, a negative one the
       opposite sign convention);
     - ``delta`` whose sign disagrees with the yaw rate (``delta`` vs ``L r / vx``);
-    - too few rows with a valid IMU sample.
+    - too few rows with a valid IMU sample at or above :data:`MIN_SPEED`.
+
+Accepted and named (``LOG_FORMAT.md`` allows them)
+    - timestamp jitter: steps off the median by more than 25 % (below the gap threshold). Every
+      estimator predicts over each row's own step (the observer's kernel, the linear KF, the
+      blend's switching); only the observer's certified gains are designed for the median step.
+      Counted in ``CleaningReport.sampling``, a warning and the notes.
+    - rows slower than :data:`MIN_SPEED` (a drive starting or stopping at standstill, reversing):
+      the bicycle model is singular at ``vx = 0`` (every estimator floors the speed there), so
+      their ``ay`` and ``yaw_rate`` become NaN: the estimators predict through them without a
+      correction, as the camera path does between frames. Counted in ``CleaningReport.low_speed``,
+      a warning and the notes.
 
 Cleaning (causal: each sample is judged from the past only, as a car would on line)
     - ``delta`` and ``yaw_rate`` samples that jump from the last accepted value by more
@@ -33,16 +44,22 @@ content of the accelerometer and are counted, not removed.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..io import DrivingLog, LogFormatError, read_log
+from ..io import DrivingLog, LogFormatError, read_log, row_gaps
+from ..observer._kernel import V_FLOOR
 from ..params import VehicleParams
 
-__all__ = ["CleaningReport", "clean_imu_log", "read_imu_log", "check_imu_log"]
+__all__ = ["CleaningReport", "MIN_SPEED", "clean_imu_log", "read_imu_log", "check_imu_log"]
+
+#: rows slower than this carry no IMU correction [m/s]: the estimators' speed floor (``V_FLOOR``), where
+#: the bicycle model stops describing the car (singular at standstill)
+MIN_SPEED = V_FLOOR
 
 
 @dataclass
@@ -70,6 +87,12 @@ class CleaningReport:
         Std of ``a_y`` minus its 3-sample moving mean [m/s^2] (vibration level; information).
     checks : dict
         Unit and sign checks with their measured values.
+    low_speed : dict
+        ``count`` of rows slower than :data:`MIN_SPEED` whose ``ay`` and ``yaw_rate`` became NaN,
+        ``limit_mps`` and their ``spans_s`` (first and last time of each run, at most 20).
+    sampling : dict
+        ``median_dt_s``, ``min_dt_s``, ``max_dt_s`` and ``jitter_steps``: steps off the median by
+        more than 25 % (accepted: each is predicted over its own duration).
     """
 
     rows: int
@@ -81,6 +104,8 @@ class CleaningReport:
     repeated_fraction: dict = field(default_factory=dict)
     ay_high_frequency_std: float = float("nan")
     checks: dict = field(default_factory=dict)
+    low_speed: dict = field(default_factory=lambda: {"count": 0})
+    sampling: dict = field(default_factory=lambda: {"jitter_steps": 0})
 
     def to_dict(self) -> dict:
         return {
@@ -93,6 +118,8 @@ class CleaningReport:
             "repeated_value_fraction": self.repeated_fraction,
             "ay_high_frequency_std_mps2": self.ay_high_frequency_std,
             "checks": self.checks,
+            "low_speed": self.low_speed,
+            "sampling": self.sampling,
         }
 
     def notes(self) -> list[str]:
@@ -104,7 +131,30 @@ class CleaningReport:
             f"ay: {self.ay_out_of_range['count']} sample(s) beyond the physical bound set to NaN",
             f"missing (prediction-only) samples: ay {self.missing['ay']}, yaw_rate {self.missing['yaw_rate']}",
         ]
+        if self.low_speed.get("count"):
+            out.append(_low_speed_note(self.low_speed))
+        if self.sampling.get("jitter_steps"):
+            out.append(_jitter_note(self.sampling))
         return out
+
+
+def _low_speed_note(low: dict) -> str:
+    spans = ", ".join(f"{a:.6g}-{b:.6g} s" for a, b in low["spans_s"][:5]) + (" ..." if len(low["spans_s"]) > 5 else "")
+    return (f"low speed: {low['count']} row(s) slower than {low['limit_mps']:g} m/s (t = {spans}) carry no IMU "
+            "correction (ay and yaw_rate read as missing): the bicycle model is singular at standstill, so the "
+            "estimators predict through them")
+
+
+def _jitter_note(sam: dict) -> str:
+    return (f"non-uniform sampling: {sam['jitter_steps']} step(s) off the median {sam['median_dt_s']:.4g} s by more "
+            f"than 25 % (steps {sam['min_dt_s']:.4g}-{sam['max_dt_s']:.4g} s): every estimator predicts over each "
+            "row's own step; the observer's gains are certified for the median step")
+
+
+def _runs(mask: NDArray, t: NDArray, limit: int = 20) -> list[list[float]]:
+    """``[t_first, t_last]`` of each run of True in ``mask`` (at most ``limit``)."""
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
+    return [[float(t[a]), float(t[b - 1])] for a, b in zip(edges[::2], edges[1::2])][:limit]
 
 
 def _spike_hold(x: NDArray, max_step: float, max_hold: int = 3) -> tuple[NDArray, NDArray, int]:
@@ -135,8 +185,10 @@ def _spike_hold(x: NDArray, max_step: float, max_hold: int = 3) -> tuple[NDArray
     return y, replaced, accepted
 
 
-def check_imu_log(log: DrivingLog, vehicle: VehicleParams | None = None, jitter: float = 0.25) -> dict:
+def check_imu_log(log: DrivingLog, vehicle: VehicleParams | None = None) -> dict:
     """The error checks of the module docstring; returns the measured values.
+
+    Rows slower than :data:`MIN_SPEED` take no part in the checks (their IMU samples are not used).
 
     Raises
     ------
@@ -152,23 +204,23 @@ def check_imu_log(log: DrivingLog, vehicle: VehicleParams | None = None, jitter:
         raise LogFormatError(f"{src}: only {len(t)} rows; an IMU log needs at least 3")
     dt = np.diff(t)
     med = float(np.median(dt))
-    bad = np.flatnonzero(np.abs(dt - med) > jitter * med)
-    if len(bad):
-        i = int(bad[0])
+    gaps, limit = row_gaps(t)
+    if len(gaps):
+        i = int(gaps[np.argmax(dt[gaps])])
         raise LogFormatError(
-            f"{src}: non-uniform sampling: step {dt[i]:.4g} s at t={t[i]:.4f} (median {med:.4g} s; "
-            f"{len(bad)} step(s) off by more than {100 * jitter:.0f} %). Split the log at the gap or resample it."
+            f"{src}: non-uniform sampling with a gap: no rows for {dt[i]:.4g} s from t={t[i]:.6g} (median step "
+            f"{med:.4g} s; {len(gaps)} step(s) over {limit:.3g} s). Nothing, not even the steering, was logged there; "
+            "split the log at the gap."
         )
     r, ay, vx, delta = s["yaw_rate"], s["ay"], s["vx"], s["delta"]
-    fin = np.isfinite(r) & np.isfinite(ay)
+    moving = vx >= MIN_SPEED
+    fin = np.isfinite(r) & np.isfinite(ay) & moving
     if fin.sum() < 3:
-        raise LogFormatError(f"{src}: fewer than 3 rows have both ay and yaw_rate")
+        raise LogFormatError(f"{src}: fewer than 3 rows have both ay and yaw_rate at a speed of at least {MIN_SPEED:g} "
+                             f"m/s (fastest vx {float(np.nanmax(vx)):.3g}): the IMU observer needs forward motion (m/s)")
     rmax = float(np.nanmax(np.abs(r)))
     if rmax > 5.0:
         raise LogFormatError(f"{src}: |yaw_rate| reaches {rmax:.3g} > 5 rad/s: yaw_rate must be in rad/s (deg/s given?)")
-    if np.any(vx <= 0):
-        i = int(np.argmax(vx <= 0))
-        raise LogFormatError(f"{src}: vx = {vx[i]:.3g} <= 0 at t={t[i]}: the IMU observer needs forward motion (m/s)")
     checks: dict = {"median_dt_s": med}
     vr = vx * r
     turning = fin & (np.abs(vr) > 2.0)
@@ -187,7 +239,7 @@ def check_imu_log(log: DrivingLog, vehicle: VehicleParams | None = None, jitter:
         checks["ay_vs_vx_r_slope"] = None
         checks["note"] = "too little cornering to check the units and sign of ay"
     if vehicle is not None:
-        kin = vehicle.wheelbase * r / np.maximum(vx, 1.0)
+        kin = vehicle.wheelbase * r / np.maximum(vx, MIN_SPEED)
         sel = fin & (np.abs(r) > 0.05)
         if sel.sum() >= 50:
             corr = float(np.corrcoef(delta[sel], kin[sel])[0, 1])
@@ -233,7 +285,18 @@ def clean_imu_log(
     ay = s["ay"]
     out = np.abs(ay) > max_abs_ay
     ay = np.where(out, np.nan, ay)
+    slow = ~(s["vx"] >= MIN_SPEED)  # standstill, reversing: no correction (module docstring)
+    ay = np.where(slow, np.nan, ay)
+    yaw = np.where(slow, np.nan, yaw)
     s["delta"], s["yaw_rate"], s["ay"] = delta, yaw, ay
+    src = log.source or "log"
+    low = {"count": int(slow.sum()), "limit_mps": float(MIN_SPEED), "spans_s": _runs(slow, t)}
+    steps = np.diff(t)
+    sampling = {"median_dt_s": dt, "min_dt_s": float(steps.min()), "max_dt_s": float(steps.max()),
+                "jitter_steps": int(np.sum(np.abs(steps - dt) > 0.25 * dt))}  # fmt: skip
+    for on, note in ((low["count"], _low_speed_note), (sampling["jitter_steps"], _jitter_note)):
+        if on:
+            warnings.warn(f"{src}: " + note(low if note is _low_speed_note else sampling), stacklevel=2)
 
     def rep_frac(x):
         x = x[np.isfinite(x)]
@@ -259,6 +322,8 @@ def clean_imu_log(
         },
         ay_out_of_range={"count": int(out.sum()), "t": t[out].round(4).tolist()[:50], "limit_mps2": max_abs_ay},
         missing={"ay": int(np.isnan(ay).sum()), "yaw_rate": int(np.isnan(yaw).sum())},
+        low_speed=low,
+        sampling=sampling,
         repeated_fraction={k: rep_frac(log.sensors[k]) for k in ("delta", "yaw_rate", "ay", "vx")},
         ay_high_frequency_std=hf,
         checks=checks,

@@ -32,7 +32,7 @@ from .outputs import (
     record_run_info,
     run_context,
 )
-from .reader import VEHICLE_FILE_KEYS, finish_log, read_log, read_vehicle
+from .reader import ROW_GAP_FACTOR, ROW_GAP_MIN_S, VEHICLE_FILE_KEYS, finish_log, read_log, read_vehicle, row_gaps
 from .units import UNIT_CHECKS_HINT, check_log_units
 from .writers import atomic_write_json, atomic_write_text, to_jsonable, write_log, write_table
 
@@ -43,6 +43,9 @@ __all__ = [
     "write_log",
     "write_table",
     "read_vehicle",
+    "row_gaps",
+    "ROW_GAP_FACTOR",
+    "ROW_GAP_MIN_S",
     "atomic_write_text",
     "atomic_write_json",
     "atomic_directory",

@@ -20,7 +20,7 @@ from .log import KNOWN_COLUMNS, SENSOR_COLUMNS, DrivingLog, LogFormatError
 from .outputs import current_run_context
 from .units import check_log_units
 
-__all__ = ["read_log", "finish_log", "read_vehicle", "VEHICLE_FILE_KEYS"]
+__all__ = ["read_log", "finish_log", "read_vehicle", "row_gaps", "VEHICLE_FILE_KEYS", "ROW_GAP_FACTOR", "ROW_GAP_MIN_S"]
 
 
 def _validate(columns: dict[str, NDArray], source: str) -> str:
@@ -297,6 +297,29 @@ ROW_GAP_FACTOR = 10.0
 ROW_GAP_MIN_S = 0.5
 
 
+def row_gaps(t: NDArray) -> tuple[NDArray, float]:
+    """The stretches of a log without rows (a logger pause).
+
+    Parameters
+    ----------
+    t : ndarray
+        Row times [s], strictly increasing.
+
+    Returns
+    -------
+    gaps : ndarray of int
+        Indices ``i`` with ``t[i + 1] - t[i]`` over the limit (the gap lies after row ``i``).
+    limit : float
+        ``max(ROW_GAP_FACTOR * median step, ROW_GAP_MIN_S)`` [s] (``inf`` for fewer than 3 rows).
+    """
+    t = np.asarray(t, dtype=float)
+    if len(t) < 3:
+        return np.zeros(0, dtype=np.int64), float("inf")
+    dt = np.diff(t)
+    limit = max(ROW_GAP_FACTOR * float(np.median(dt)), ROW_GAP_MIN_S)
+    return np.flatnonzero(dt > limit), limit
+
+
 def _note_row_gaps(t: NDArray, source: str, notes: list[str]) -> None:
     """Name the stretches with no rows at all (a logger pause) in a warning and the notes.
 
@@ -313,11 +336,8 @@ def _note_row_gaps(t: NDArray, source: str, notes: list[str]) -> None:
     notes : list of str
         Appended to.
     """
-    if len(t) < 3:
-        return
+    gaps, limit = row_gaps(t)
     dt = np.diff(t)
-    limit = max(ROW_GAP_FACTOR * float(np.median(dt)), ROW_GAP_MIN_S)
-    gaps = np.flatnonzero(dt > limit)
     if not len(gaps):
         return
     i = int(gaps[np.argmax(dt[gaps])])
