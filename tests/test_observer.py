@@ -524,3 +524,58 @@ def test_a_short_quiet_drive_is_not_identifiable_not_a_linear_algebra_error():
     assert res.verdict == "not_identifiable"
     _, infos = res.stiffness_functionals()
     assert any("too narrow" in info["method"] for info in infos)
+
+
+def _newey_west_reference(u, max_lag=None):
+    """The definition of :func:`newey_west_variance` written out: every lag's autocovariance by a direct sum."""
+    u = np.asarray(u, dtype=float)
+    n = u.shape[0]
+    u = u - u.mean(axis=0)
+    acov = np.array([np.sum(u[: n - l] * u[l:], axis=0) for l in range(n)])
+    if max_lag is None:
+        rho = np.mean(np.abs(acov / acov[0]), axis=1)
+        below = np.flatnonzero(rho < 2.0 / math.sqrt(n))
+        first = int(below[0]) if len(below) else n // 4
+        max_lag = int(min(max(4 * first, 4 * n ** (2.0 / 9.0)), n // 4))
+    w = 1.0 - np.arange(1, max_lag + 1) / (max_lag + 1.0)
+    return acov[0] + 2.0 * np.sum(w[:, None] * acov[1 : max_lag + 1], axis=0)
+
+
+@pytest.mark.parametrize("n, corr", [(50, 0.0), (400, 0.9), (3000, 0.99), (3000, 0.9995)])
+def test_newey_west_variance_matches_its_definition(n, corr):
+    """The FFT of just over n + n/4 rows and the bandwidth read up to lag n/16 give the definition's
+    variance (AR(1) columns: white, short and long memory; 0.9995 puts the bandwidth at the cap n/4)."""
+    from tire_learning_env.observer.offline import newey_west_variance
+
+    rng = np.random.default_rng(n)
+    e = rng.standard_normal((n, 5))
+    u = np.empty_like(e)
+    u[0] = e[0]
+    for k in range(1, n):
+        u[k] = corr * u[k - 1] + e[k]
+    u = u @ rng.standard_normal((5, 7))  # correlated columns, as a fit's score directions are
+    np.testing.assert_allclose(newey_west_variance(u), _newey_west_reference(u), rtol=1e-10)
+    np.testing.assert_allclose(newey_west_variance(u, max_lag=7), _newey_west_reference(u, max_lag=7), rtol=1e-10)
+
+
+def test_offline_variance_is_the_same_for_one_direction_or_a_grid_of_them(monkeypatch):
+    """:meth:`OfflineFit.variance` projects the scores a block of directions at a time (converted once for a
+    grid): each direction's variance is the same as alone, to rounding (the bandwidth, shared by the
+    directions of one call, is fixed here by a single kept lag count)."""
+    from tire_learning_env.observer import offline as O
+
+    rng = np.random.default_rng(3)
+    n, nw = 5000, 6
+    scores = (np.cumsum(rng.standard_normal((n, nw)), axis=0) * 0.01 + rng.standard_normal((n, nw))).astype(np.float32)
+    B = rng.standard_normal((nw, nw))
+    A = B @ B.T + nw * np.eye(nw)
+    fit = O.OfflineFit(np.zeros(nw), A, 0.1 * np.eye(nw), np.linalg.inv(A), None, [], 0, n, scores=scores)
+    g = rng.standard_normal((3 * O.nw_columns_per_fft(n) + 5, nw))
+    monkeypatch.setattr(O, "NW_KEPT_LAGS", 64)  # a second sweep whenever the bandwidth is beyond 63 lags
+    grid = fit.variance(g)
+    u = scores.astype(float) @ np.linalg.solve(A, g.T)
+    model = np.einsum("ij,ji->i", g, np.linalg.solve(A, g.T))
+    assert np.all(grid > 0) and np.all(np.isfinite(grid))
+    ref = _newey_west_reference(u)
+    data_part = np.einsum("ij,ij->j", np.linalg.solve(A, g.T), (A - 0.1 * np.eye(nw)) @ np.linalg.solve(A, g.T))
+    np.testing.assert_allclose(grid, np.maximum(model - data_part, 0.0) + np.maximum(ref, data_part), rtol=1e-10)
