@@ -473,6 +473,31 @@ def test_standstill_and_reversing_rows_carry_no_imu_correction(tmp_path):
     assert np.all(np.isfinite(est["beta_hat"])) and np.all(np.isfinite(est["beta_kf"]))
 
 
+def test_a_pause_in_an_imu_log_is_a_segment_boundary(tmp_path):
+    """3 s without rows in a 60 s IMU log: estimate accepts it (it was refused, 'split the log at the gap';
+    an independent 120 s log with a 5 s pause now gives -0.2 / -0.3 %, identified): the observer restarts
+    its state after the pause with the learned curve carried over (and settles again: the IMU observer's
+    settle_s, 15 s here, is not fitted after it, as at the start), the linear KF starts afresh there (its
+    Euler step across seconds is unstable), and metrics.json names the segments."""
+    cols = _imu_columns(n=6001, seed=1)
+    keep = (cols["t"] < 35.0) | (cols["t"] > 38.0)
+    cols = {k: v[keep] for k, v in cols.items()}
+    with pytest.warns(UserWarning, match="no rows over 1 stretch"):
+        log = read_log(_write(tmp_path, cols))
+    with pytest.raises(LogFormatError, match="gap"):  # the discrepancy workflow's cleaning still refuses it
+        clean_imu_log(log, V)
+    m = estimate_imu_log(log, V, tmp_path / "out")
+    seg = m["calibration"]["segments"]
+    assert len(seg["pauses"]) == 1 and seg["pauses"][0][1] == pytest.approx(38.0, abs=0.011)
+    assert m["cleaning"]["sampling"]["jitter_steps"] == 0  # the pause is not jitter
+    err, covered = _stiffness_error_pct(m)
+    assert m["summary"]["verdict"] == "identified" and all(covered), (err, covered)
+    assert max(abs(e) for e in err) < 1.5, err
+    est = np.genfromtxt(tmp_path / "out" / "estimates.csv", delimiter=",", names=True)
+    assert np.all(np.isfinite(est["beta_kf"])) and np.all(np.isfinite(est["beta_hat"]))
+    assert np.max(np.abs(est["beta_kf"])) < 0.2
+
+
 def test_a_log_too_short_for_a_measured_curve_is_scored_null_not_a_crash(tmp_path):
     """3 s of an IMU log with a reference sideslip: a half of it has no two slip bins of 20 samples.
     ``estimate`` on such a log (an independent 0.5-3 s single-track log with true_vy) ended in 'ValueError:

@@ -247,7 +247,8 @@ def estimate_imu(
     # the KF's own speed floor (1 m/s) makes its forward-Euler step unstable at standstill for a stiff car or a
     # slow log (1 - dt (Cf + Cr) / (m v) < -1); the observer's floor V_FLOOR keeps it stable where the IMU
     # samples are not used anyway (logs.MIN_SPEED)
-    ktrace = kf.run(dict(rows, vx=np.maximum(rows["vx"], MIN_SPEED)))
+    ktrace = _kf_by_segment(kf, dict(rows, vx=np.maximum(rows["vx"], MIN_SPEED)), core.observer.segment_gap_s,
+                            vehicle, noise_used, dt)  # fmt: skip
     runtime["linear_kf"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     # the refined pass used the whole log: its mode probabilities may too (smoothed); the causal one stays causal
@@ -269,6 +270,25 @@ def estimate_imu(
     return ImuEstimate(core, ktrace, kf, b_final, b_online, noise_info, runtime, params,
                        online_other_law=other[1] if other else None, blend_fallback=fallback,
                        online_fallback=online_fallback)  # fmt: skip
+
+
+def _kf_by_segment(kf: LinearKalmanFilter, rows: dict, gap_s: float, vehicle: VehicleParams, noise, dt: float):
+    """The linear KF over ``rows``; after each pause longer than ``gap_s`` [s] (the observer's
+    ``segment_gap_s``) a fresh filter starts, as at the start of the log (its forward-Euler step across
+    a pause of seconds is unstable, and nothing was measured there). ``kf`` runs the first segment."""
+    t = rows["t"]
+    cuts = (np.flatnonzero(np.diff(t) > gap_s) + 1).tolist() if math.isfinite(gap_s) else []
+    if not cuts:
+        return kf.run(rows)
+    parts = []
+    for i, (a, b) in enumerate(zip([0] + cuts, cuts + [len(t)])):
+        f = kf if i == 0 else LinearKalmanFilter(vehicle, noise_std=noise, physics_dt=dt)
+        parts.append(f.run({k: v[a:b] for k, v in rows.items()}, predict_last=b == len(t)))
+    fields = ("t", "state", "slip", "force", "force_nonlinear", "std", "health", "innovation", "nis", "vx", "kappa")
+    out = {f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}
+    return EstimateTrace(**out, weights=parts[0].weights, state_names=parts[0].state_names,
+                         meta=dict(parts[0].meta, segments=len(parts),
+                                   beta=np.concatenate([p.meta["beta"] for p in parts])))  # fmt: skip
 
 
 # -- the estimate command on an IMU log -------------------------------------------------------------
@@ -327,7 +347,7 @@ def estimate_imu_log(
     if warm_start is not None:
         config = config.replace(offline=bool(warm_start))
     config = imu_config(config)
-    cleaned, report = clean_imu_log(log, vehicle)
+    cleaned, report = clean_imu_log(log, vehicle, allow_gaps=True)  # pauses: segment boundaries (estimate_imu)
     rows = _rows(cleaned.sensors)
     t_start = time.perf_counter()
     result = estimate_imu(rows, vehicle, config, blend=blend, cache=cache)

@@ -8,7 +8,8 @@ appended to ``log.notes``):
 Errors (:class:`..io.LogFormatError`, naming the problem)
     - no ``yaw_rate`` or ``ay`` column;
     - a stretch without rows (:func:`..io.row_gaps`: a step over 10x the median and
-      over 0.5 s, the reader's gap): nothing was logged there, not even the steering;
+      over 0.5 s, the reader's gap), unless ``allow_gaps`` (the ``estimate`` command: every
+      estimator restarts its state after such a pause, :func:`.estimate.estimate_imu`);
     - ``yaw_rate`` that cannot be in rad/s (``|r| > 5 rad/s``: deg/s?);
     - ``ay`` that cannot be in m/s^2 or has the wrong sign: while cornering, ``a_y`` must
       follow ``vx r`` (slope 0.5-2; a slope near 0.1 means g units, a negative one the
@@ -185,10 +186,11 @@ def _spike_hold(x: NDArray, max_step: float, max_hold: int = 3) -> tuple[NDArray
     return y, replaced, accepted
 
 
-def check_imu_log(log: DrivingLog, vehicle: VehicleParams | None = None) -> dict:
+def check_imu_log(log: DrivingLog, vehicle: VehicleParams | None = None, allow_gaps: bool = False) -> dict:
     """The error checks of the module docstring; returns the measured values.
 
     Rows slower than :data:`MIN_SPEED` take no part in the checks (their IMU samples are not used).
+    ``allow_gaps``: a stretch without rows is no error (the caller treats it as a segment boundary).
 
     Raises
     ------
@@ -205,7 +207,7 @@ def check_imu_log(log: DrivingLog, vehicle: VehicleParams | None = None) -> dict
     dt = np.diff(t)
     med = float(np.median(dt))
     gaps, limit = row_gaps(t)
-    if len(gaps):
+    if len(gaps) and not allow_gaps:
         i = int(gaps[np.argmax(dt[gaps])])
         raise LogFormatError(
             f"{src}: non-uniform sampling with a gap: no rows for {dt[i]:.4g} s from t={t[i]:.6g} (median step "
@@ -258,6 +260,7 @@ def clean_imu_log(
     max_steer_rate: float = 2.0,
     max_yaw_accel: float = 20.0,
     max_abs_ay: float = 30.0,
+    allow_gaps: bool = False,
 ) -> tuple[DrivingLog, CleaningReport]:
     """Checked and cleaned copy of an IMU log, and the report of what was done.
 
@@ -274,8 +277,10 @@ def clean_imu_log(
         Largest physical yaw acceleration [rad/s^2].
     max_abs_ay : float
         Largest physical lateral acceleration [m/s^2].
+    allow_gaps : bool
+        Accept stretches without rows (:func:`check_imu_log`); they stay out of the jitter count.
     """
-    checks = check_imu_log(log, vehicle)
+    checks = check_imu_log(log, vehicle, allow_gaps=allow_gaps)
     s = {k: np.array(v, dtype=float, copy=True) for k, v in log.sensors.items()}
     t = s["t"]
     dt = float(np.median(np.diff(t)))
@@ -292,6 +297,7 @@ def clean_imu_log(
     src = log.source or "log"
     low = {"count": int(slow.sum()), "limit_mps": float(MIN_SPEED), "spans_s": _runs(slow, t)}
     steps = np.diff(t)
+    steps = np.delete(steps, row_gaps(t)[0])  # pauses are no jitter (estimate: segment boundaries)
     sampling = {"median_dt_s": dt, "min_dt_s": float(steps.min()), "max_dt_s": float(steps.max()),
                 "jitter_steps": int(np.sum(np.abs(steps - dt) > 0.25 * dt))}  # fmt: skip
     for on, note in ((low["count"], _low_speed_note), (sampling["jitter_steps"], _jitter_note)):

@@ -323,8 +323,8 @@ def row_gaps(t: NDArray) -> tuple[NDArray, float]:
 def _note_row_gaps(t: NDArray, source: str, notes: list[str]) -> None:
     """Name the stretches with no rows at all (a logger pause) in a warning and the notes.
 
-    Nothing is measured there, not even the steering: the estimators predict across such a gap
-    from the rows on either side of it, so a long one costs accuracy, and the user should know
+    Nothing is measured there, not even the steering: the estimators treat such a gap as a segment
+    boundary (:func:`tire_learning_env.observer.estimator.log_segments`), and the user should know
     it is there.
 
     Parameters
@@ -342,8 +342,9 @@ def _note_row_gaps(t: NDArray, source: str, notes: list[str]) -> None:
         return
     i = int(gaps[np.argmax(dt[gaps])])
     message = (f"{source}: the log has no rows over {len(gaps)} stretch(es) longer than {limit:.3g} s (the longest "
-               f"{dt[i]:.3g} s, from t={t[i]:.6g} s): nothing, not even the steering, was logged there, so an "
-               "estimator can only predict across it, at a cost in accuracy (split the log at it if that matters)")
+               f"{dt[i]:.3g} s, from t={t[i]:.6g} s): nothing, not even the steering, was logged there, so the "
+               "estimators treat each as a segment boundary: nothing is predicted or fitted across it, the state "
+               "restarts after it as at the start of the log and the learned curve carries over")
     warnings.warn(message, stacklevel=4)
     notes.append(message.split(": ", 1)[1])
 

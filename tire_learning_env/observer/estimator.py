@@ -223,6 +223,35 @@ def _lower_posterior_cost(obs: NeuroAdaptiveObserver, rows: dict, from_causal, f
     return best
 
 
+def log_segments(t: ArrayLike) -> dict:
+    """The log's pauses (:func:`tire_learning_env.io.row_gaps`: a step over 10x the median and over
+    0.5 s) and the segments between them, for the calibration record.
+
+    Every pass of :func:`estimate` treats a pause as a segment boundary
+    (:attr:`NeuroAdaptiveObserver.segment_gap_s`): nothing is predicted or fitted across it; the state
+    restarts after it as at the start of the log, the learned weights and their covariance carry over,
+    and the rows of the first ``settle_s`` after it are left out of the fits, as at the start.
+
+    Returns
+    -------
+    dict
+        ``gap_limit_s``, ``pauses`` (``[t_before, t_after]`` [s] of each), ``segments_s`` (``[t_first,
+        t_last]`` of each segment) and ``note``.
+    """
+    from ..io import row_gaps
+
+    t = np.asarray(t, dtype=float)
+    gaps, limit = row_gaps(t)
+    starts, ends = np.r_[0, gaps + 1], np.r_[gaps, len(t) - 1]
+    out = {"gap_limit_s": float(limit), "pauses": [[float(t[i]), float(t[i + 1])] for i in gaps],
+           "segments_s": [[float(t[a]), float(t[b])] for a, b in zip(starts, ends)]}  # fmt: skip
+    out["note"] = ("no pause in the log" if not len(gaps) else
+                   f"{len(gaps)} pause(s) longer than {limit:.3g} s split the log into {len(gaps) + 1} segments: "
+                   "nothing is predicted or fitted across a pause; the state restarts after it as at the start of "
+                   "the log, the learned curve and its covariance carry over")  # fmt: skip
+    return out
+
+
 def estimate(
     sensors: Mapping[str, ArrayLike],
     vehicle: VehicleParams,
@@ -283,6 +312,8 @@ def estimate(
         imu_period=None if imu_period is None else float(f"{imu_period:.4g}"),
     )  # fmt: skip
     runtime["gains"] = time.perf_counter() - t0
+    segments = log_segments(t)
+    obs.segment_gap_s = segments["gap_limit_s"] if segments["pauses"] else math.inf
     calibration = {
         "sensors": model.name,
         "sensors_source": "detected from the log's columns" if config.sensors == "auto" else "given",
@@ -292,6 +323,7 @@ def estimate(
         "imu_period_s": imu_period,
         "speed_range_mps": list(speed_range),
         "row_period_median_s": dt,
+        "segments": segments,
         "vehicle": vehicle.to_dict(),
         "stiffness": "given (pinned below the linear region)" if config.stiffness_known else "learned (the vehicle "
         "file's Cf, Cr are only the starting point)",

@@ -129,6 +129,12 @@ class NeuroAdaptiveObserver:
         #: steering, constant over its step) or ``"ramp"`` (first-order hold: a sampled continuous
         #: steering wheel); :func:`~.estimator.estimate` chooses from the log
         self.steering_hold = "hold"
+        #: a step between rows longer than this [s] is a pause of the log (a segment boundary): nothing is
+        #: predicted across it; the state restarts after it as at the start of a log (zero, its prior
+        #: covariance, health settling for ``settle_s``), the weights and their covariance carry over.
+        #: :func:`~.estimator.estimate` sets it from :func:`tire_learning_env.io.row_gaps` when the log has a
+        #: pause; ``inf``: no boundary (on-line use)
+        self.segment_gap_s = math.inf
         self.n_bias = N_BIAS_PARAMS if (self.model.uses_imu and self.adaptation.sensor_offsets) else 0
         nw = basis.n_weights + self.n_bias
         w0 = np.zeros(nw) if initial_weights is None else np.asarray(initial_weights, dtype=float).reshape(-1)
@@ -323,9 +329,9 @@ class NeuroAdaptiveObserver:
         m = K.MODE_FIXED if mode == "fixed" else K.MODE_CAUSAL
         if not record:
             store_scores = compute_std = store_weights = False
-        S = self._settings(m, self._t0 or 0.0, adapt=adapt, store_scores=store_scores, accumulate_from=accumulate_from,
-                           gate=gate, compute_std=compute_std, store_weights=store_weights, kalman=kalman,
-                           record=record, shift_frames=shift_frames)  # fmt: skip
+        kw = dict(adapt=adapt, store_scores=store_scores, gate=gate, compute_std=compute_std,
+                  store_weights=store_weights, kalman=kalman, record=record, shift_frames=shift_frames)  # fmt: skip
+        S = self._settings(m, self._t0 or 0.0, accumulate_from=accumulate_from, **kw)
         nr = n if record else 0
         acc = accumulator if accumulator is not None else K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4), np.empty((0, 2)))
         out = K.Outputs(
@@ -336,8 +342,21 @@ class NeuroAdaptiveObserver:
         )  # fmt: skip
         if n:
             wk = K.make_work(nx, nw, self._bounds[0].shape[1])
-            K.run_rows(rows["t"], rows["delta"], rows["vx"], rows["ax"], rows["kappa"], rows["z"], self._model_tuple,
-                       self._gain_tuple, S, self._state, acc, out, wk, bool(predict_last))  # fmt: skip
+            t = rows["t"]
+            for a, b, restart in self._segments(t):
+                S_ab = S
+                if restart:  # after a pause: the state as at a log's start, settling again (segment_gap_s)
+                    self._restart_segment()
+                    t_seg = float(t[a])
+                    S_ab = self._settings(m, t_seg, accumulate_from=max(accumulate_from, t_seg + self.settle_s), **kw)
+                if a == 0 and b == n:
+                    out_ab, acc_ab = out, acc
+                else:  # the rows' slices: the kernel indexes its outputs, scores and innovations by row
+                    out_ab = K.Outputs(*(v[a:b] for v in out))
+                    acc_ab = acc._replace(innov=acc.innov[a:b]) if acc.innov.shape[0] else acc
+                K.run_rows(t[a:b], rows["delta"][a:b], rows["vx"][a:b], rows["ax"][a:b], rows["kappa"][a:b],
+                           rows["z"][a:b], self._model_tuple, self._gain_tuple, S_ab, self._state, acc_ab, out_ab, wk,
+                           bool(predict_last) if b == n else False)  # nothing predicted across a pause
             self.t = float(rows["t"][-1]) + (self.dt if predict_last else 0.0)
         if not record:
             return None
@@ -349,6 +368,36 @@ class NeuroAdaptiveObserver:
         if store_scores:
             trace.meta["scores"] = out.score
         return trace
+
+    # -- pauses in a log (segment_gap_s) --------------------------------------------------------
+    def _segments(self, t: NDArray) -> list[tuple[int, int, bool]]:
+        """``(first, end, restart)`` row ranges of ``t`` between pauses longer than ``segment_gap_s``;
+        ``restart``: the state restarts before the range (also the first one, when the previous call's
+        last row lies a pause before it)."""
+        n = len(t)
+        if not math.isfinite(self.segment_gap_s):
+            return [(0, n, False)]
+        cuts = (np.flatnonzero(np.diff(t) > self.segment_gap_s) + 1).tolist()
+        prev = float(self._state.hs[K.HS_PREV_T])
+        first = bool(prev == prev and float(t[0]) - prev > self.segment_gap_s)
+        return [(a, b, first or a > 0) for a, b in zip([0] + cuts, cuts + [n])]
+
+    def _restart_segment(self) -> None:
+        """The state after a pause of the log: as :meth:`reset` leaves it (zero state, its prior
+        covariance, no sensitivity to the weights, health settling, no previous row, no delayed
+        frames), with the weights, their covariance, the checkpoints and the trip count kept."""
+        st = self._state
+        st.x[:] = 0.0
+        st.ups[:] = 0.0
+        st.sig[:] = self.initial_state_covariance()
+        trips = st.hs[K.HS_TRIPS]
+        ck = st.hs[[K.HS_N_CKPT, K.HS_CKPT_HEAD]].copy()
+        st.hs[:] = 0.0
+        st.hs[K.HS_CODE] = K.HEALTH_SETTLING
+        st.hs[K.HS_PREV_T] = np.nan
+        st.hs[K.HS_TRIPS] = trips
+        st.hs[[K.HS_N_CKPT, K.HS_CKPT_HEAD]] = ck
+        st.hist_meta[:] = 0
 
     # -- the "block" causal law (AdaptationParams.causal_update) ---------------------------------
     def _block_state(self) -> dict:
@@ -460,7 +509,8 @@ class NeuroAdaptiveObserver:
             if np.any((h == K.HEALTH_NO_DATA) | (h == K.HEALTH_INCONSISTENT) | (h == K.HEALTH_DIVERGED)):
                 b["healthy"] = False  # adaptation frozen while the health flag is tripped
             pieces.append(tr)
-            if not last:  # to the next row, as run() would have predicted inside one call
+            if not last and float(t[j] - t[j - 1]) <= self.segment_gap_s:  # to the next row, as run() would
+                # have predicted inside one call (across a pause nothing: run() restarts the state there)
                 dt_j = float(t[j] - t[j - 1])
                 d0, d1 = float(rows["delta"][j - 1]), float(rows["delta"][j])
                 ramp = (d1 - d0) / dt_j if (self.steering_hold == "ramp" and dt_j > 0 and np.isfinite(d1)) else 0.0
