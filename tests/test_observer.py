@@ -632,3 +632,24 @@ def test_a_log_with_a_pause_is_estimated_as_the_segments_together():
     k, sd, true = np.array(res.cornering_stiffness()), np.array(res.cornering_stiffness_std()), np.array([V.Cf, V.Cr])
     assert res.verdict == "identified"
     assert np.all(np.abs(k - true) <= 2.0 * sd) and np.all(np.abs(k / true - 1.0) < 0.02), (k / true - 1.0, sd / true)
+
+
+def test_offline_variance_computes_the_sandwich_of_the_same_directions_once(monkeypatch):
+    """The stiffness's sandwich is asked for by the summary, the verdict, the report and the learned slip range:
+    one Newey-West sweep per fit and directions, the same answer every time; other directions sweep again."""
+    from tire_learning_env.observer import offline as O
+
+    rng = np.random.default_rng(4)
+    n, nw = 2000, 5
+    scores = rng.standard_normal((n, nw)).astype(np.float32)
+    A = np.eye(nw) * 50.0
+    fit = O.OfflineFit(np.zeros(nw), A, 0.1 * np.eye(nw), np.linalg.inv(A), None, [], 0, n, scores=scores)
+    sweeps = []
+    inner = O._newey_west_columns
+    monkeypatch.setattr(O, "_newey_west_columns", lambda *a, **k: sweeps.append(1) or inner(*a, **k))
+    g = rng.standard_normal((2, nw))
+    first = fit.variance(g)
+    np.testing.assert_array_equal(fit.variance(g.copy()), first)
+    assert len(sweeps) == 1
+    fit.variance(g[:1])
+    assert len(sweeps) == 2

@@ -173,7 +173,7 @@ class OfflineFit:
     iterations: int
     updates: int
     scores: NDArray = field(repr=False, default=None)
-    _u_cache: dict = field(default_factory=dict, repr=False)
+    _sandwich_cache: dict = field(default_factory=dict, repr=False)
 
     def variance(self, g: NDArray) -> NDArray:
         """Variance of ``g^T w`` for rows ``g`` (n, nw): sandwich on the data share, prior share kept."""
@@ -185,6 +185,16 @@ class OfflineFit:
         prior_part = np.maximum(model - data_part, 0.0)
         if self.scores is None or self.scores.shape[0] < 8:
             return model + self.prior_sensitivity(g)
+        # the sandwich of the same directions is asked for again and again (the stiffness: by the summary, the
+        # verdict, the report and the learned slip range per axle; 7 times in an estimate command): once per fit
+        key = (g.shape, g.tobytes(), id(self.hessian), id(self.prior_precision), id(self.scores))
+        if key not in self._sandwich_cache:
+            self._sandwich_cache[key] = self._sandwich(Ainv_g)
+        sandwich = self._sandwich_cache[key]
+        return prior_part + np.maximum(sandwich, data_part) + self.prior_sensitivity(g)
+
+    def _sandwich(self, Ainv_g: NDArray) -> NDArray:
+        """Newey-West long-run variance of the scores projected on the columns of ``Ainv_g`` (nw, n)."""
         scores = self.scores
         many = Ainv_g.shape[1] > nw_columns_per_fft(scores.shape[0])
         scores64 = np.ascontiguousarray(scores.T, dtype=float) if many else None  # once for many directions (a grid)
@@ -201,8 +211,7 @@ class OfflineFit:
                 u[:, r : r + block] = v @ scores[r : r + block].T.astype(float)
             return u
 
-        sandwich = _newey_west_columns(columns, scores.shape[0], Ainv_g.shape[1])
-        return prior_part + np.maximum(sandwich, data_part) + self.prior_sensitivity(g)
+        return _newey_west_columns(columns, scores.shape[0], Ainv_g.shape[1])
 
     def prior_sensitivity(self, g: NDArray) -> NDArray:
         """Sensitivity variance of ``g^T w``: per assumption the log cannot settle, the largest
