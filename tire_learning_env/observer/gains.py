@@ -369,7 +369,7 @@ def _dense_contraction(vehicle, model, group, T, imu_T, edges, box, noise, L_imu
         for v in np.geomspace(va, vb, n):
             for kf in np.linspace(*box[0], n):
                 for kr in np.linspace(*box[1], n):
-                    sub = np.array([[kf, kf], [kr, kr]])
+                    sub = np.array([[kf], [kr]])  # one corner (a box [kf, kf] x [kr, kr] made the same map four times)
                     vx = _vertices(vehicle, model, group, T, imu_T, v, sub, noise,
                                    None if L_imu_si is None else L_imu_si[c], state_weight)[0]  # fmt: skip
                     A, B, W, C, D, Hs = _scaled(vx, S, noise_g, 1.0)
