@@ -155,7 +155,8 @@ def _interpolated(cols):
 
 
 @pytest.mark.parametrize("road, spoil, symptom", [
-    ("study1", _frozen, r"the camera repeats the same e1 and e2 exactly over 1 stretch\(es\) of 2.95 s"),
+    ("study1", _frozen, r"the camera repeats the same e1 and e2 exactly over 1 stretch\(es\) of 2.95 s .*its 59 "
+                        r"repeated frame\(s\) are read as missing"),
     ("study1", _interpolated, "the camera looks interpolated to every row"),
     ("study1", lambda c: c.__setitem__("kappa", np.zeros_like(c["kappa"])), "kappa is 0 on every row, yet the steering"),
     ("straight", lambda c: None, None),  # a straight road: kappa 0 on every row and rightly so
@@ -178,3 +179,8 @@ def test_camera_symptoms_are_named_in_a_warning(tmp_path, road, spoil, symptom):
     with pytest.warns(UserWarning, match=symptom):
         log = read_log(path, check_units=False)
     assert any(re.search(symptom, note) for note in log.notes)
+    if spoil is _frozen:  # the repeats read as missing, the first frame of the run and the others kept
+        t, e1 = log.sensors["t"], log.sensors["e1"]
+        frames = np.isfinite(cols["e1"])
+        assert np.isfinite(e1[frames & (t < 10.01)]).all() and np.isfinite(e1[frames & (t >= 13.0)]).all()
+        assert np.isnan(e1[frames & (t > 10.01) & (t < 13.0)]).all() and np.isnan(log.sensors["e2"][~np.isfinite(e1)]).all()

@@ -2,7 +2,9 @@
 
 Each of these logs reads and runs; the estimate then comes out ``not_identifiable`` or with a
 wrong band without a word about why. The reader names the likely cause in a warning and the
-log notes (never an error: each check looks at a symptom, and the user may know better).
+log notes (never an error: each check looks at a symptom, and the user may know better), and
+reads the repeats of a frozen camera as missing frames (:func:`frozen_frames`): a camera
+repeating e1 and e2 to the last digit for a second while the car steers measured nothing new.
 Measured on independent single-track logs and this package's simulated ones: each check
 fires on the log it is written for and on none of about 70 good logs (sedans, SUVs, vans, race
 cars; 5-300 Hz cameras, latencies, dropouts, jitter, pauses, straight roads).
@@ -15,7 +17,7 @@ from typing import Mapping
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["camera_warnings", "FROZEN_MIN_S", "FROZEN_MIN_FRAMES", "INTERPOLATED_FRACTION", "ASSUMED_WHEELBASE_M"]
+__all__ = ["camera_warnings", "frozen_frames", "FROZEN_MIN_S", "FROZEN_MIN_FRAMES", "INTERPOLATED_FRACTION", "ASSUMED_WHEELBASE_M"]
 
 #: identical consecutive camera frames (both ``e1`` and ``e2``) over at least this long [s] and this many
 #: frames, while the steering moves, are named as a frozen camera
@@ -34,31 +36,58 @@ def _integral(t: NDArray, y: NDArray) -> NDArray:
     return out
 
 
-def _frozen(t: NDArray, e1: NDArray, e2: NDArray, delta: NDArray) -> str | None:
-    """The longest run of frames repeating the previous one exactly, when the steering moved meanwhile."""
+def _frozen_runs(t: NDArray, e1: NDArray, e2: NDArray, delta: NDArray) -> list[tuple[int, int]]:
+    """``(first_row, last_row)`` of each run of frames repeating the previous one exactly (both ``e1`` and
+    ``e2``) over at least :data:`FROZEN_MIN_S` and :data:`FROZEN_MIN_FRAMES` while the steering moved."""
     frame = np.flatnonzero(np.isfinite(e1) & np.isfinite(e2))
     if len(frame) < FROZEN_MIN_FRAMES + 1:
-        return None
+        return []
     same = (np.diff(e1[frame]) == 0) & (np.diff(e2[frame]) == 0)
     edges = np.flatnonzero(np.diff(np.r_[0, same.astype(np.int8), 0]))
-    runs = [(a, b) for a, b in zip(edges[::2], edges[1::2])]  # same[a:b]: frames a .. b repeat frame a
     found = []
-    for a, b in runs:
-        i0, i1 = frame[a], frame[b]
+    for a, b in zip(edges[::2], edges[1::2]):  # same[a:b]: frames a+1 .. b repeat frame a
+        i0, i1 = int(frame[a]), int(frame[b])
         if b - a + 1 < FROZEN_MIN_FRAMES or t[i1] - t[i0] < FROZEN_MIN_S:
             continue
         steer = delta[i0 : i1 + 1]
         steer = steer[np.isfinite(steer)]
         if len(steer) and float(np.ptp(steer)) > 1e-3:
-            found.append((float(t[i1] - t[i0]), float(t[i0]), float(t[i1]), b - a + 1))
-    if not found:
+            found.append((i0, i1))
+    return found
+
+
+def frozen_frames(columns: Mapping[str, NDArray]) -> NDArray:
+    """Rows whose camera frame only repeats the one before a frozen stretch (the module's first symptom).
+
+    Parameters
+    ----------
+    columns : mapping of str -> ndarray
+        ``t`` [s], ``delta`` [rad], ``e1`` [m], ``e2`` [rad] (NaN: no frame).
+
+    Returns
+    -------
+    ndarray of bool
+        True on the repeats (every frame of a frozen run but its first); the reader reads them as missing.
+    """
+    t, delta, e1, e2 = (np.asarray(columns[k], dtype=float) for k in ("t", "delta", "e1", "e2"))
+    mask = np.zeros(len(t), dtype=bool)
+    frame = np.isfinite(e1) & np.isfinite(e2)
+    for i0, i1 in _frozen_runs(t, e1, e2, delta):
+        mask[i0 + 1 : i1 + 1] = frame[i0 + 1 : i1 + 1]
+    return mask
+
+
+def _frozen(t: NDArray, e1: NDArray, e2: NDArray, delta: NDArray) -> str | None:
+    runs = _frozen_runs(t, e1, e2, delta)
+    if not runs:
         return None
-    total = sum(f[0] for f in found)
-    longest = max(found)
-    return (f"the camera repeats the same e1 and e2 exactly over {len(found)} stretch(es) of {total:.3g} s in all (the "
-            f"longest {longest[0]:.3g} s, {longest[3]} frames, t={longest[1]:.6g}-{longest[2]:.6g} s) while the "
-            "steering moves: a frozen camera or a logger holding its last value? The estimators take each repeat as "
-            "a fresh measurement; leave the rows without a new frame empty (NaN)")
+    spans = [(float(t[b] - t[a]), float(t[a]), float(t[b])) for a, b in runs]
+    longest = max(spans)
+    repeats = int(frozen_frames({"t": t, "delta": delta, "e1": e1, "e2": e2}).sum())
+    return (f"the camera repeats the same e1 and e2 exactly over {len(runs)} stretch(es) of "
+            f"{sum(s[0] for s in spans):.3g} s in all (the longest {longest[0]:.3g} s, t={longest[1]:.6g}-"
+            f"{longest[2]:.6g} s) while the steering moves: a frozen camera or a logger holding its last value; "
+            f"its {repeats} repeated frame(s) are read as missing (no new frame)")
 
 
 def _interpolated(e1: NDArray, e2: NDArray) -> str | None:

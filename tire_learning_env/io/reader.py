@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from ..params import ParameterError, VehicleParams
 from .log import KNOWN_COLUMNS, SENSOR_COLUMNS, DrivingLog, LogFormatError
 from .outputs import current_run_context
-from .camera_checks import camera_warnings
+from .camera_checks import camera_warnings, frozen_frames
 from .units import check_log_units
 
 __all__ = ["read_log", "finish_log", "read_vehicle", "row_gaps", "VEHICLE_FILE_KEYS", "ROW_GAP_FACTOR", "ROW_GAP_MIN_S"]
@@ -253,7 +253,12 @@ def finish_log(columns: dict[str, NDArray], source: str, notes: list[str], min_r
                        "interpolate the path curvature in time between its values")
             warnings.warn(message, stacklevel=3)
             notes.append(message.split(": ", 1)[1])
-        for symptom in camera_warnings(columns):  # a frozen or interpolated camera, a missing kappa
+        symptoms = camera_warnings(columns)  # a frozen or interpolated camera, a missing kappa
+        frozen = frozen_frames(columns)
+        if frozen.any():  # a frozen camera's repeats: no new frame (camera_checks)
+            for k in ("e1", "e2"):
+                columns[k] = np.where(frozen, np.nan, columns[k])
+        for symptom in symptoms:
             warnings.warn(f"{source}: {symptom}", stacklevel=3)
             notes.append(symptom)
     sensor_cols = {k: columns[k] for k in SENSOR_COLUMNS if k in columns}
