@@ -653,3 +653,47 @@ def test_offline_variance_computes_the_sandwich_of_the_same_directions_once(monk
     assert len(sweeps) == 1
     fit.variance(g[:1])
     assert len(sweeps) == 2
+
+
+@pytest.fixture(scope="module")
+def soft_file_log():
+    """40 s of lane changes and a vehicle file at half the truth's stiffness (the truth's beside it)."""
+    log = simulate("lane_changes", 40.0, camera=CameraParams.paper_noise(rate=20.0), seed=2)
+    soft = log.vehicle.replace(Cf=0.5 * log.vehicle.Cf, Cr=0.5 * log.vehicle.Cr)
+    return log, soft, {"front": log.vehicle.Cf, "rear": log.vehicle.Cr}
+
+
+def test_a_vehicle_file_at_half_the_stiffness_is_recentred_not_a_confident_wrong_band(soft_file_log):
+    """The basis and its weight box scale with the vehicle file's stiffness (learned slope within 0.2-1.6 x
+    the file's), so a file at 0.5 x caps the curve. Before: on this drive the front was not identified at
+    -33 % and the rear *identified* at -31 %, band [-36, -26] %. Now the capped fit is re-centred on its own
+    stiffness and refitted: -0.2 / -1.1 %, as with the right file (-0.2 / -1.2 %)."""
+    log, soft, true = soft_file_log
+    res = estimate(log.sensors, soft)
+    rep = res.stiffness_report()
+    for a in ("front", "rear"):  # no confident wrong number
+        if rep[a]["identified"]:
+            assert abs(rep[a]["estimate_N_per_rad"] / true[a] - 1.0) < 0.02, (a, rep[a]["estimate_N_per_rad"] / true[a])
+    assert all(rep[a]["identified"] or rep[a].get("reason") for a in ("front", "rear")), rep
+    assert res.verdict == "identified"
+    bounds = res.calibration["weight_bounds"]
+    assert bounds["recentred"] and bounds["steps"][0]["from_N_per_rad"] == {"front": soft.Cf, "rear": soft.Cr}
+    assert not bounds["not_identified"]
+    assert res.calibration["vehicle"]["Cf"] == soft.Cf  # the file is recorded; the re-centred one beside it
+    assert res.file_vehicle == soft and res.nominal_axle_force(0.01, "front") == pytest.approx(2 * soft.Cf * 0.01)
+
+
+def test_an_axle_left_at_its_weight_bound_is_not_identified_and_the_reason_named(soft_file_log):
+    """Without a re-centre (``recentre_max=0``) the file at 0.5 x leaves the curve capped: those axles are not
+    identified, whatever their band, and the summary names the bound."""
+    log, soft, _ = soft_file_log
+    capped = estimate(log.sensors, soft, config=ObserverConfig(recentre_max=0))
+    bounds = capped.calibration["weight_bounds"]
+    assert not bounds["recentred"] and bounds["not_identified"], bounds
+    rep = capped.stiffness_report()
+    for a in bounds["not_identified"]:
+        assert not rep[a]["identified"] and rep[a]["estimate_N_per_rad"] is None
+        assert rep[a]["reason"].startswith("weights at their bound")
+    assert capped.verdict == "not_identifiable" and "weights at their bound" in capped.summary()["verdict_reason"]
+    with pytest.raises(ParameterError, match="recentre_max"):
+        ObserverConfig(recentre_max=-1)

@@ -143,6 +143,9 @@ def _imu_line(out: Path, metrics: dict) -> str:
 
 
 def _stiffness_text(summary: dict) -> str:
+    reason = summary.get("verdict_reason") or ""
+    if summary.get("verdict") != "identified" and "weights at their bound" in reason:
+        return f"stiffness NOT IDENTIFIED: {reason} (see metrics.json: calibration.weight_bounds)"
     if summary.get("verdict") != "identified":
         widths = []
         for a in ("front", "rear"):

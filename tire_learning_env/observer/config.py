@@ -84,6 +84,14 @@ class ObserverConfig(_Params):
         Stiffness reported as identified when its two-sigma band is within this fraction.
     curve_rel_2sigma : float
         Learned slip range: where the curve's two-sigma band is within this fraction.
+    recentre_max : int
+        How many times :func:`.estimator.estimate` re-centres the basis on the fit's stiffness
+        when the weights the stiffness read-out leans on end at their bound (a vehicle file far
+        from the truth); an axle still at its bound is not identified. ``0``: never (the bound
+        is still detected and named).
+    bound_tolerance : float
+        Distance to a weight bound, as a fraction of the box width, that counts as at the bound
+        (:func:`.readout.weights_at_bound`).
     """
 
     sensors: str = "auto"
@@ -112,6 +120,8 @@ class ObserverConfig(_Params):
     nis_factor: float = HealthParams.nis_factor
     identifiable_rel_2sigma: float = 0.1
     curve_rel_2sigma: float = 0.1
+    recentre_max: int = 2
+    bound_tolerance: float = 0.05
 
     _positive: ClassVar[tuple[str, ...]] = ("initial_std", "max_std", "nis_factor", "identifiable_rel_2sigma",
                                             "curve_rel_2sigma", "camera_force_error", "imu_force_error")  # fmt: skip
@@ -133,6 +143,11 @@ class ObserverConfig(_Params):
                 if arr.shape != (2,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
                     raise ParameterError(f"ObserverConfig.{name} must be two std values >= 0, got {v!r}")
                 object.__setattr__(self, name, tuple(float(x) for x in arr))
+        r = self.recentre_max
+        if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or r < 0:
+            raise ParameterError(f"ObserverConfig.recentre_max must be an integer >= 0, got {self.recentre_max!r}")
+        if not (isinstance(self.bound_tolerance, (int, float)) and 0.0 <= self.bound_tolerance < 0.5):
+            raise ParameterError(f"ObserverConfig.bound_tolerance must be in [0, 0.5), got {self.bound_tolerance!r}")
         if self.latency is not None and not (math.isfinite(self.latency) and self.latency >= 0):
             raise ParameterError(f"ObserverConfig.latency must be >= 0 s or None, got {self.latency!r}")
 

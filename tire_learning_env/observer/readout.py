@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .neuro_adaptive import NeuroAdaptiveObserver
 
-__all__ = ["stiffness_gradient", "curve_gradient", "stiffness_readout"]
+__all__ = ["stiffness_gradient", "curve_gradient", "stiffness_readout", "weights_at_bound"]
 
 
 def stiffness_gradient(observer: NeuroAdaptiveObserver, axle: int) -> NDArray:
@@ -81,3 +81,70 @@ def stiffness_readout(observer: NeuroAdaptiveObserver, w: NDArray, slip: NDArray
     info = {"range_deg": [math.degrees(r_lo), math.degrees(r_hi)], "secant_drop_at_range_end": float(drop),
             "method": f"weighted degree-{degree} polynomial fit of the learned curve over the range"}  # fmt: skip
     return 0.5 * g_axle, info
+
+
+def weights_at_bound(observer: NeuroAdaptiveObserver, w: NDArray, functionals: NDArray, tolerance: float = 0.05,
+                     min_share: float = 0.2) -> list[dict]:  # fmt: skip
+    """Per axle: whether the learned curve is capped by the weight box.
+
+    The basis scales every weight by the vehicle file's stiffness (``gamma_i = 2 C_i``,
+    :func:`.basis.two_sided_basis`) and bounds it, so the learned slope stays within a fixed
+    multiple of the file's: a file far from the truth caps the curve, and the fit reports the
+    cap (or a curve bent around it) as the answer with a band that does not reach the truth
+    (a file at 0.6 x the truth's stiffness: -4.1 % with a 2-sigma band of +/-1.3 %). A weight
+    is at its bound when it lies within ``tolerance`` of the box width ``W_hi - W_lo`` of
+    ``W_hi`` or ``W_lo``. The curve is capped when
+
+    - a weight the stiffness read-out leans on (``|g_j| >= min_share max_j |g_j|`` on that
+      axle) is at either bound, or
+    - any slip-segment weight is at its upper bound: a slope above ``1 + W_hi`` times the
+      file's anywhere (a file at 0.5 x: the read-out's own weights at 0.85 of the bound, the
+      segments beside them at 0.97, the stiffness -24 %). The lower bound away from the
+      read-out is not counted: past the peak of the curve the slope is rightly below
+      ``1 + W_lo`` times the file's.
+
+    Parameters
+    ----------
+    observer : NeuroAdaptiveObserver
+        Holds the basis (its weight box).
+    w : ndarray (nw,)
+        The fitted weights.
+    functionals : ndarray (2, nw)
+        The stiffness read-out ``g`` per axle (:func:`stiffness_readout`).
+    tolerance : float
+        Distance to a bound, as a fraction of the box width, that counts as at the bound.
+    min_share : float
+        Share of the largest ``|g_j|`` of the axle above which weight ``j`` counts as one the
+        read-out leans on.
+
+    Returns
+    -------
+    list of dict
+        Front, rear: ``at_bound`` (bool), ``read_out_weights`` and ``upper_weights`` (indices
+        into the axle's basis members at a bound, by the two rules above) and
+        ``largest_fraction`` (of the bound reached, ``w / W_hi`` or ``w / W_lo``, over the
+        slip-segment weights).
+    """
+    b = observer.basis
+    N = b.n_per_axle
+    w = np.asarray(w, dtype=float)
+    g = np.asarray(functionals, dtype=float)
+    out = []
+    for i in (0, 1):
+        wi = w[i * N : (i + 1) * N]
+        gi = np.abs(g[i, i * N : (i + 1) * N])
+        lo, hi = b.weight_lower[i], b.weight_upper[i]
+        width = hi - lo
+        segment = (b.lower[i] != b.upper[i]) & (width > 0)
+        leans = segment & (gi >= min_share * gi.max()) if gi.max() > 0 else np.zeros(N, dtype=bool)
+        at_hi = segment & (wi >= hi - tolerance * width)
+        at_lo = segment & (wi <= lo + tolerance * width)
+        read_out = leans & (at_hi | at_lo)
+        frac = np.where(wi >= 0, wi / np.where(hi > 0, hi, np.inf), wi / np.where(lo < 0, lo, -np.inf))
+        out.append({
+            "at_bound": bool(read_out.any() or at_hi.any()),
+            "read_out_weights": [int(j) for j in np.flatnonzero(read_out)],
+            "upper_weights": [int(j) for j in np.flatnonzero(at_hi)],
+            "largest_fraction": float(frac[segment].max()) if segment.any() else 0.0,
+        })  # fmt: skip
+    return out

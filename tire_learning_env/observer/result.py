@@ -42,6 +42,10 @@ class EstimationResult:
         What was estimated from the log and what was given or assumed.
     runtime_s : dict
         Wall times of the steps [s].
+    config : ObserverConfig
+    file_vehicle : VehicleParams, optional
+        The vehicle file when the basis was re-centred away from its stiffness
+        (``calibration["weight_bounds"]``); :attr:`vehicle` is then the re-centred one.
     """
 
     sensors: str
@@ -54,6 +58,7 @@ class EstimationResult:
     calibration: dict
     runtime_s: dict
     config: ObserverConfig = field(default_factory=ObserverConfig)
+    file_vehicle: VehicleParams | None = None
 
     @property
     def trace(self) -> EstimateTrace:
@@ -87,7 +92,8 @@ class EstimationResult:
         return lambda alpha, axle: self.observer.axle_force(alpha, axle, weights=w)
 
     def nominal_axle_force(self, alpha: ArrayLike, axle: str) -> NDArray:
-        v = self.vehicle
+        """The vehicle file's linear axle force ``2 C alpha`` [N] (the file, also after a re-centre)."""
+        v = self.file_vehicle or self.vehicle
         return 2.0 * (v.Cf if axle_index(axle) == 0 else v.Cr) * np.asarray(alpha, dtype=float)
 
     def _variance(self, G: NDArray) -> NDArray:
@@ -130,12 +136,26 @@ class EstimationResult:
         return float(s[0]), float(s[1])
 
     def stiffness_report(self) -> dict:
-        """Per axle: estimate, std, two-sigma band [N/rad] (per tire) and whether it is identified."""
+        """Per axle: estimate, std, two-sigma band [N/rad] (per tire), whether it is identified
+        and, when not, why (``reason``).
+
+        An axle whose read-out weights are still at their bound after the re-centring of
+        :func:`.estimator.estimate` (``calibration["weight_bounds"]["not_identified"]``) is not
+        identified whatever its band: the band is that of a capped curve."""
         k = self.cornering_stiffness()
         s = self.cornering_stiffness_std()
+        capped = self.calibration.get("weight_bounds", {}).get("not_identified", [])
         out = {}
         for i, a in enumerate(AXLES):
-            ident = bool(2.0 * s[i] <= self.config.identifiable_rel_2sigma * abs(k[i]))
+            narrow = bool(2.0 * s[i] <= self.config.identifiable_rel_2sigma * abs(k[i]))
+            ident = narrow and a not in capped
+            if a in capped:
+                reason = ("weights at their bound: the vehicle file's stiffness is probably far from the truth "
+                          "(the learned curve is capped; the band is that of the capped curve)")
+            elif not narrow:
+                reason = f"2-sigma band wider than {self.config.identifiable_rel_2sigma:g} of the value"
+            else:
+                reason = None
             out[a] = {
                 "identified": ident,
                 "estimate_N_per_rad": float(k[i]) if ident else None,
@@ -143,6 +163,7 @@ class EstimationResult:
                 "std_N_per_rad": float(s[i]),
                 "band_2sigma_N_per_rad": [float(k[i] - 2 * s[i]), float(k[i] + 2 * s[i])],
                 "relative_2sigma": float(2 * s[i] / abs(k[i])) if k[i] else float("inf"),
+                "reason": reason,
             }
         return out
 
@@ -151,6 +172,13 @@ class EstimationResult:
         """``identified`` when both axles' stiffness is identified, else ``not_identifiable``."""
         rep = self.stiffness_report()
         return "identified" if all(r["identified"] for r in rep.values()) else "not_identifiable"
+
+    @property
+    def verdict_reason(self) -> str | None:
+        """Why the verdict is not ``identified`` (per axle), ``None`` when it is."""
+        rep = self.stiffness_report()
+        why = [f"{a}: {r['reason']}" for a, r in rep.items() if not r["identified"]]
+        return "; ".join(why) or None
 
     def learned_slip_range(self, n: int = 201) -> dict:
         """Per axle ``[lo, hi]`` [deg]: the contiguous slip range around zero, inside the slip the
@@ -186,6 +214,7 @@ class EstimationResult:
         return {
             "sensors": self.sensors,
             "verdict": self.verdict,
+            "verdict_reason": self.verdict_reason,
             "stiffness_front_N_per_rad": rep["front"]["estimate_N_per_rad"],
             "stiffness_front_2sigma_N_per_rad": rep["front"]["band_2sigma_N_per_rad"],
             "stiffness_rear_N_per_rad": rep["rear"]["estimate_N_per_rad"],
