@@ -184,3 +184,23 @@ def test_camera_symptoms_are_named_in_a_warning(tmp_path, road, spoil, symptom):
         frames = np.isfinite(cols["e1"])
         assert np.isfinite(e1[frames & (t < 10.01)]).all() and np.isfinite(e1[frames & (t >= 13.0)]).all()
         assert np.isnan(e1[frames & (t > 10.01) & (t < 13.0)]).all() and np.isnan(log.sensors["e2"][~np.isfinite(e1)]).all()
+
+
+def test_a_camera_log_whose_imu_columns_say_vx_is_in_kmh_is_warned(tmp_path):
+    """A city drive (12 m/s) logged in km/h reads as 43 'm/s': below the median check's 70, and the camera's
+    kinematics cannot tell it from sideslip. The log's IMU columns can (ay = 0.28 x vx*yaw_rate): the reader
+    warns, naming vx (the independent fuzz log kmh_city ran to not_identifiable unnamed). Correct units:
+    no warning."""
+    from tire_learning_env.params import CameraParams, VehicleParams
+
+    log = simulate("study1", 30.0, vehicle=VehicleParams().replace(vx=12.0), camera=CameraParams.paper_noise(rate=20.0),
+                   seed=1, physics_rate=100.0)  # fmt: skip
+    cols = {k: np.asarray(log.sensors[k], dtype=float) for k in ("t", "vx", "delta", "kappa", "e1", "e2", "yaw_rate", "ay")}
+    write_log(tmp_path / "ms.csv", cols)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_log(tmp_path / "ms.csv")
+    write_log(tmp_path / "kmh.csv", dict(cols, vx=3.6 * cols["vx"]))
+    with pytest.warns(UserWarning, match=r"ay = 0.2\d+ x vx\*yaw_rate .*'vx' looks like km/h .*it does use vx"):
+        read = read_log(tmp_path / "kmh.csv")
+    assert read.kind == "camera" and any("looks like km/h" in n for n in read.notes)

@@ -242,7 +242,7 @@ def finish_log(columns: dict[str, NDArray], source: str, notes: list[str], min_r
     if check_units is None:
         check_units = current_run_context().check_units
     if check_units:
-        check_log_units(columns, kind, source)
+        notes.extend(check_log_units(columns, kind, source))
     else:
         notes.append("unit plausibility checks skipped (--no-unit-checks)")
     _note_row_gaps(columns["t"], source, notes)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from typing import Mapping
 
 import numpy as np
@@ -38,7 +39,7 @@ def _integral(t: NDArray, y: NDArray) -> NDArray:
 UNIT_CHECKS_HINT = "if you are sure the units are SI, pass --no-unit-checks"
 
 
-def check_log_units(columns: Mapping[str, NDArray], kind: str, source: str = "log") -> None:
+def check_log_units(columns: Mapping[str, NDArray], kind: str, source: str = "log") -> list[str]:
     """Raise :class:`LogFormatError` naming a column whose unit looks wrong and the likely unit.
 
     Checks: the time step (ms instead of s), the speed (km/h instead of m/s: median above
@@ -49,7 +50,17 @@ def check_log_units(columns: Mapping[str, NDArray], kind: str, source: str = "lo
     opposite sign conventions), ``a_y = vx yaw_rate`` on IMU logs, and the heading change
     against the integral of ``vx delta / L`` (degrees give a wheelbase 50x too long; a
     negative slope means the opposite steering sign convention).
+
+    A camera log with IMU columns gets the IMU check too, as a warning (the camera estimate does not
+    use ``ay`` and ``yaw_rate``, but ``a_y = vx r`` still tells a speed in km/h, which the camera's own
+    kinematics cannot tell from sideslip): a city drive in km/h ran to ``not_identifiable`` unnamed.
+
+    Returns
+    -------
+    list of str
+        The warnings given (for the log notes).
     """
+    found: list[str] = []
     t, vx, delta = columns["t"], columns["vx"], columns["delta"]
     dt = np.diff(t)
     fix = f"; {UNIT_CHECKS_HINT}"
@@ -68,9 +79,18 @@ def check_log_units(columns: Mapping[str, NDArray], kind: str, source: str = "lo
         if big > 0.5:
             raise LogFormatError(f"{source}: |e2| reaches {big:.3g}: that looks like degrees; e2 must be in radians{fix}")
         _check_camera_kinematics(columns, source, fix)
+        if "yaw_rate" in columns and "ay" in columns:
+            try:
+                _check_imu_kinematics(columns, source, "")
+            except LogFormatError as err:
+                message = (f"{err} (this camera log's IMU columns disagree with vx: the camera estimate does not "
+                           "use ay and yaw_rate, but it does use vx)")
+                warnings.warn(message, stacklevel=4)
+                found.append(message.split(": ", 1)[1])
     if kind == "imu":
         _check_imu_kinematics(columns, source, fix)
     _check_steering(columns, kind, source, fix)
+    return found
 
 
 def _check_camera_kinematics(columns, source, fix) -> None:
