@@ -10,7 +10,9 @@ Two logs, each estimated in its own process (so the peak memory is that log's):
 
 Per log: the wall time of each step (:attr:`~tire_learning_env.observer.EstimationResult.runtime_s`),
 the process CPU time, rows per second, the fixed-weight passes of the offline fit and the
-latency profile (count, seconds), the peak resident memory (``ru_maxrss``) and, so that speed
+latency profile (count, seconds), the peak resident memory (``ru_maxrss``), the time of the curve
+bands the ``estimate`` command computes after the estimate (``bands_s``: learned slip range, curve
+file, plot; the peak after them ``peak_after_bands_MB``) and, so that speed
 is never bought with accuracy, the estimated stiffness, its two-sigma band and its error
 against the truth. BLAS runs single-threaded (``_bench_common``), as everywhere in the benchmarks.
 
@@ -46,6 +48,26 @@ def _make_log(name: str):
     return log.sensors, v, v.replace(Cf=v.Cf * 1.08, Cr=v.Cr * 0.94)
 
 
+def _bands(res) -> float:
+    """Wall time [s] of the curve bands ``tire-learning estimate`` computes from the result after the estimate
+    (the learned slip range, the curve file's 161-point grid and the plot's 401-point grid, per axle: Newey-West
+    sandwiches of 1526 directions over the log's scores)."""
+    import math
+
+    import numpy as np
+
+    from tire_learning_env.metrics import excited_range
+
+    t0 = time.perf_counter()
+    res.learned_slip_range()
+    for i, axle in enumerate(("front", "rear")):
+        res.axle_force_std(np.radians(np.linspace(-8, 8, 161)), axle)
+        lo, hi = (math.degrees(v) for v in excited_range(res.trace.slip[:, i]))
+        span = 1.6 * max(abs(lo), abs(hi), 0.2)
+        res.axle_force_std(np.radians(np.linspace(-span, span, 401)), axle)
+    return time.perf_counter() - t0
+
+
 def run_one(name: str) -> dict:
     """Estimate one log in this process; the figures of :data:`LOGS`."""
     import numpy as np
@@ -74,8 +96,10 @@ def run_one(name: str) -> dict:
     finally:
         K.run_rows = orig
     n = len(np.asarray(sensors["t"]))
+    peak_estimate = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     cf, cr = res.cornering_stiffness()
     sf, sr = res.cornering_stiffness_std()
+    bands_s = _bands(res)
     fixed = [p for p in passes if p[1] == K.MODE_FIXED]
     return {
         "rows": n,
@@ -88,7 +112,9 @@ def run_one(name: str) -> dict:
         "fixed_pass_rows": int(sum(p[0] for p in fixed)),
         "fixed_passes_s": round(sum(p[2] for p in fixed), 3),
         "us_per_row_per_pass": round(1e6 * sum(p[2] for p in fixed) / max(sum(p[0] for p in fixed), 1), 3),
-        "peak_MB": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+        "peak_MB": round(peak_estimate, 1),
+        "bands_s": round(bands_s, 3),
+        "peak_after_bands_MB": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
         "latency_s": res.calibration.get("latency", {}).get("latency_s"),
         "offline_iterations": res.fit.iterations if res.fit is not None else None,
         "stiffness_N_per_rad": [cf, cr],
