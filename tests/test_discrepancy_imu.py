@@ -217,6 +217,19 @@ def test_clean_imu_data_gives_none(tmp_path, seed):
     assert res.effects == [] and res.gap_ratio == pytest.approx(1.0)
 
 
+def test_a_pause_in_a_clean_imu_log_splits_the_windows_and_gives_none(tmp_path):
+    """A logger pause (3 s without rows) was refused ('non-uniform sampling with a gap'); the windows split at it."""
+    log = _log(tmp_path, {}, seed=11)
+    t = log.sensors["t"]
+    keep = (t < 27.0) | (t >= 30.0)
+    path = tmp_path / "paused.csv"
+    write_log(path, {k: np.asarray(v)[keep] for k, v in {**log.sensors, **log.truth}.items()})
+    res = _analyze(read_log(path))
+    log_notes = res.to_json()["log"]["notes"]
+    assert any("gap(s) longer than" in n and "split the windows" in n for n in log_notes), log_notes
+    assert res.verdict == "none", [(k, v.get("lr")) for st in res.selection.steps for k, v in st.tried.items()]
+
+
 @pytest.mark.slow
 def test_clean_imu_data_gives_none_in_19_of_20_seeds(tmp_path):
     verdicts = [_analyze(_log(tmp_path, {}, seed=100 + s)).verdict for s in range(20)]
@@ -287,10 +300,9 @@ def test_command_on_an_imu_log_writes_the_report(tmp_path, capsys):
         ("t,vx,delta,yaw_rate,ay", [f"{0.01 * i:.2f},30,0,0,0" for i in range(300)], "too short to fit anything"),
         ("t,vx,delta,yaw_rate,ay", [f"{0.01 * i:.2f},30,0,0,{'nan' if i > 20 else 0}" for i in range(900)],
          "valid ay samples"),
-        ("t,vx,delta,yaw_rate,ay", [f"{0.013 * i if i < 400 else 0.013 * i + 1:.3f},30,0,0,0" for i in range(900)],
-         "non-uniform sampling"),
+        ("t,vx,delta,yaw_rate,ay", [f"{0.01 * i:.2f},1.5,0,0,0" for i in range(900)], "needs forward motion"),
     ],
-    ids=["too-short", "no-ay", "gap"],
+    ids=["too-short", "no-ay", "standstill"],
 )
 def test_bad_imu_log_is_a_clear_error(tmp_path, capsys, header, rows, message):
     path = tmp_path / "bad.csv"

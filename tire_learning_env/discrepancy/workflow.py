@@ -93,8 +93,9 @@ def analyze(
     if log.kind == "imu":
         from ..imu import clean_imu_log
 
-        # checks (units, signs, uniform sampling) and causal cleaning of steering / yaw-rate spikes, reported
-        log, cleaning = clean_imu_log(log, vehicle)
+        # checks (units, signs) and causal cleaning of steering / yaw-rate spikes, reported; a pause (a stretch
+        # without rows) is no error: the windows below split at it as they do for a camera log
+        log, cleaning = clean_imu_log(log, vehicle, allow_gaps=True)
         notes += [f"IMU log cleaning: {n}" for n in cleaning.notes()]
     data = prepare(log, config)
     library = library_for(data.kind)
