@@ -156,6 +156,11 @@ class VehicleParams(_Params):
         Track width [m] (lateral load transfer).
     h_cg : float
         Height of the centre of gravity [m] (load transfer).
+    imu_x : float
+        Position of the IMU's accelerometer ahead of the centre of gravity [m] (negative:
+        behind it). An accelerometer ``x`` ahead of the CG reads ``a_y + x r_dot``; the IMU
+        estimators subtract it (:func:`tire_learning_env.imu.logs.accelerometer_at_cg`).
+        Default 0: at the CG.
     """
 
     m: float = 1529.95  # [kg]
@@ -168,6 +173,7 @@ class VehicleParams(_Params):
     width: float = 1.85  # [m]
     track: float = 1.6  # [m]
     h_cg: float = 0.55  # [m]
+    imu_x: float = 0.0  # [m] accelerometer ahead of the CG
 
     _positive: ClassVar[tuple[str, ...]] = ("m", "Iz", "lf", "lr", "vx", "Cf", "Cr", "width", "track")
     _non_negative: ClassVar[tuple[str, ...]] = ("h_cg",)
@@ -186,12 +192,13 @@ class VehicleParams(_Params):
         "width": (0.1, 4.0, "m"),
         "track": (0.1, 4.0, "m"),
         "h_cg": (0.0, 4.0, "m"),
+        "imu_x": (-10.0, 10.0, "m"),
     }
 
     def check_plausible(self) -> "VehicleParams":
         """Raise :class:`ParameterError` naming a value outside its plausible range.
 
-        Absolute ranges for ``m``, ``lf``, ``lr``, ``vx``, ``width``, ``track``, ``h_cg``
+        Absolute ranges for ``m``, ``lf``, ``lr``, ``vx``, ``width``, ``track``, ``h_cg``, ``imu_x``
         (:attr:`PLAUSIBLE`); scale-free checks for the rest: the yaw-inertia ratio
         ``Iz / (m lf lr)`` within 0.2-5 (about 1 for a car), and the per-tire cornering
         stiffness divided by the static load on that tire within 1-100 1/rad (about 10-30

@@ -174,7 +174,15 @@ def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
     frames = np.flatnonzero(np.isfinite(log.sensors["e1"]))
     if len(frames) < 10:
         raise ParameterError(f"{log.source}: only {len(frames)} camera frames; too few to estimate anything")
-    result = estimate(log.sensors, vehicle, None, config=config)
+    sensors = log.sensors
+    imu_x = float(getattr(vehicle, "imu_x", 0.0))
+    if imu_x and all(c in sensors for c in IMU_COLUMNS) and getattr(config, "sensors", "camera") != "camera":
+        from ..imu.logs import accelerometer_at_cg
+
+        # the model's a_y is the CG's: an accelerometer imu_x ahead of it reads imu_x * r_dot more
+        sensors = dict(sensors, ay=accelerometer_at_cg(sensors["t"], sensors["ay"], sensors["yaw_rate"], imu_x))
+        log.notes.append(f"ay: accelerometer {imu_x:+g} m ahead of the CG (vehicle file imu_x): ay - imu_x * r_dot used")
+    result = estimate(sensors, vehicle, None, config=config)
     trace = result.trace
     online = result.online
     summary = result.summary()

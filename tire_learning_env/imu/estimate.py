@@ -491,9 +491,11 @@ def _metrics(cleaned: DrivingLog, report: CleaningReport, vehicle, config: Obser
             "aerodynamic downforce, roll and camber, combined slip under braking/traction, tire relaxation",
             "a force offset at zero slip (not identifiable from a_y, r: F(0) = 0 is imposed); constant a_y and "
             "yaw-rate sensor offsets are learned",
-            "the IMU's position: a_y is read as the centre of gravity's (an accelerometer x m ahead of it reads "
-            "x * r_dot more, which the learned curves absorb: on an independent single-track log 0.3 m ahead gave "
-            "+5.5 / +8.4 % stiffness, 1.0 m +20 / +33 %, identified with bands that missed)",
+            (f"the IMU's position is not estimated: it is taken from the vehicle file's imu_x (here {vehicle.imu_x:+g} m "
+             "ahead of the centre of gravity; 0 = at the CG, the default) and a_y - imu_x * r_dot is used. A wrong "
+             "imu_x is absorbed by the learned curves: on an independent single-track log an accelerometer 0.3 m "
+             "ahead read as at the CG gave +5.5 / +8.4 % stiffness, 1.0 m +20 / +33 %, identified with bands that "
+             "missed"),
             "road bank and grade (g sin(bank) in a_y reads as an a_y offset, not as a slip)",
         ],
         "discrepancy_workflow": (
