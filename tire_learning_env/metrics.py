@@ -34,11 +34,24 @@ from numpy.typing import NDArray
 
 __all__ = [
     "compute_metrics", "excited_range", "curve_nrmse", "convergence_time", "bicycle_implied_axle_forces",
-    "oracle_cornering_stiffness", "basis_regressors", "stiffness_error_pct", "AXLES",
+    "oracle_cornering_stiffness", "basis_regressors", "stiffness_error_pct", "centred_moving_average", "AXLES",
 ]  # fmt: skip
 
 AXLES = ("front", "rear")
 CurveFn = Callable[[NDArray, str], NDArray]
+
+
+def centred_moving_average(t: NDArray, y: NDArray, width: float) -> NDArray:
+    """Centred moving average of ``y`` over ``t +/- width / 2`` (``t`` sorted; fewer samples at the ends).
+
+    The one smoother of the package's signal checks (discrepancy band residuals and inputs, the
+    IMU's yaw acceleration); it follows the time stamps, so jittered rows are averaged over the
+    same time span.
+    """
+    cs = np.concatenate([[0.0], np.cumsum(y)])
+    lo = np.searchsorted(t, t - 0.5 * width, side="left")
+    hi = np.searchsorted(t, t + 0.5 * width, side="right")
+    return (cs[hi] - cs[lo]) / (hi - lo)
 
 
 def excited_range(slip: NDArray, q: float = 0.5) -> tuple[float, float]:

@@ -158,9 +158,11 @@ class VehicleParams(_Params):
         Height of the centre of gravity [m] (load transfer).
     imu_x : float
         Position of the IMU's accelerometer ahead of the centre of gravity [m] (negative:
-        behind it). An accelerometer ``x`` ahead of the CG reads ``a_y + x r_dot``; the IMU
-        estimators subtract it (:func:`tire_learning_env.imu.logs.accelerometer_at_cg`).
-        Default 0: at the CG.
+        behind it). An accelerometer ``x`` ahead of the CG reads ``a_y + x r_dot``; the log
+        preparation subtracts it (:func:`tire_learning_env.imu.logs.accelerometer_at_cg`, applied
+        by ``imu.clean_imu_log`` (IMU estimate, discrepancy workflow) and by the ``estimate``
+        command's fused path); :func:`tire_learning_env.observer.estimate` called directly reads
+        ``ay`` as given. Default 0: at the CG.
     """
 
     m: float = 1529.95  # [kg]

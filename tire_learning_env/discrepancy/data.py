@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..io import DrivingLog, LogFormatError
+from ..metrics import centred_moving_average
 from ._model import CH_AY, CH_E1, CH_E2, CH_YAW, CHANNELS
 from .config import DiscrepancyConfig
 
@@ -408,14 +409,14 @@ def prepare_imu(log: DrivingLog, config: DiscrepancyConfig | None = None) -> Mod
     # AX_SMOOTHING, plus the slow part of (logged ax - slope) over AX_SLOW (grade, -r vy, sensor offset:
     # the specific force is what transfers load), a complementary filter of the two
     slope = np.gradient(vx, t) if len(t) > 1 else np.zeros_like(t)
-    ax = _moving_average_t(t, slope, AX_SMOOTHING)
+    ax = centred_moving_average(t, slope, AX_SMOOTHING)
     if "ax" in s and np.isfinite(s["ax"]).sum() >= 0.5 * len(t):
         ax_log = np.asarray(s["ax"], dtype=float).copy()
         bad = ~np.isfinite(ax_log)
         if bad.any():
             ax_log[bad] = np.interp(t[bad], t[~bad], ax_log[~bad])
             notes.append(f"ax missing on {int(bad.sum())} rows: interpolated")
-        ax = ax + _moving_average_t(t, ax_log - slope, AX_SLOW)
+        ax = ax + centred_moving_average(t, ax_log - slope, AX_SLOW)
         what = (f"slope of vx ({AX_SMOOTHING:g} s centred moving average) + slow part of logged ax - slope "
                 f"({AX_SLOW:g} s)")  # fmt: skip
     else:
@@ -465,11 +466,3 @@ def prepare_imu(log: DrivingLog, config: DiscrepancyConfig | None = None) -> Mod
         x0_guess=x0, speed_variation=variation, notes=notes, kind="imu", ax=ax, primary=(CH_YAW, CH_AY),
         ay_guess=ay0,
     )  # fmt: skip
-
-
-def _moving_average_t(t: NDArray, y: NDArray, width: float) -> NDArray:
-    """Centred moving average of ``y`` over ``t +/- width / 2`` (``t`` sorted)."""
-    cs = np.concatenate([[0.0], np.cumsum(y)])
-    lo = np.searchsorted(t, t - 0.5 * width, side="left")
-    hi = np.searchsorted(t, t + 0.5 * width, side="right")
-    return (cs[hi] - cs[lo]) / (hi - lo)

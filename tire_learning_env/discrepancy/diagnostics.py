@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from ..metrics import centred_moving_average
 from ._model import CH_AY, CH_E1, CH_E2, CH_YAW, CHANNELS, OUT_ALPHA_F, OUT_ALPHA_R
 from .data import ModelData
 from .residuals import Evaluation
@@ -45,14 +46,6 @@ UNITS = {"e1": "m", "e2": "rad", "yaw_rate": "rad/s", "ay": "m/s^2"}
 BAND_WIDTH = 0.5  # [s] moving-average width of the vehicle-dynamics band
 
 
-def _moving_average(t: NDArray, r: NDArray, width: float) -> NDArray:
-    """Centred moving average over ``t +/- width/2`` (``t`` sorted)."""
-    cs = np.concatenate([[0.0], np.cumsum(r)])
-    lo = np.searchsorted(t, t - 0.5 * width, side="left")
-    hi = np.searchsorted(t, t + 0.5 * width, side="right")
-    return (cs[hi] - cs[lo]) / (hi - lo)
-
-
 def band_residual(data: ModelData, resid: NDArray, width: float = BAND_WIDTH) -> tuple[NDArray, NDArray]:
     """Weighted residual smoothed per channel within each window, and the number of samples averaged.
 
@@ -67,7 +60,7 @@ def band_residual(data: ModelData, resid: NDArray, width: float = BAND_WIDTH) ->
         for ch in np.unique(chan):
             idx = a + np.flatnonzero(chan == ch)
             t = tm[idx]
-            out[idx] = _moving_average(t, resid[idx], width)
+            out[idx] = centred_moving_average(t, resid[idx], width)
             lo = np.searchsorted(t, t - 0.5 * width, side="left")
             hi = np.searchsorted(t, t + 0.5 * width, side="right")
             count[idx] = hi - lo
@@ -396,9 +389,8 @@ def turn_and_braking(data: ModelData, evaluation: Evaluation) -> dict:
     fin = np.isfinite(ay)
     ay_s = np.full(len(data.t), np.nan)
     if fin.any():
-        from .data import _moving_average_t
 
-        ay_s[fin] = _moving_average_t(data.t[fin], ay[fin], 0.5)
+        ay_s[fin] = centred_moving_average(data.t[fin], ay[fin], 0.5)
     turns = {"left": lambda a: a > TURN_AY, "straight": lambda a: np.abs(a) <= TURN_AY, "right": lambda a: a < -TURN_AY}
     phases = {"braking": lambda x: x < -BRAKE_AX, "neutral": lambda x: np.abs(x) <= BRAKE_AX,
               "traction": lambda x: x > BRAKE_AX}  # fmt: skip

@@ -233,7 +233,7 @@ def plot_regime_residuals(result, path=None):
     :func:`.diagnostics.turn_and_braking`): a residual of the same sign in left and right
     turns is even in a_y.
     """
-    from .data import _moving_average_t
+    from ..metrics import centred_moving_average
     from .diagnostics import TURN_AY
 
     d = result.data
@@ -242,7 +242,7 @@ def plot_regime_residuals(result, path=None):
     ay_meas[d.meas_row[m_ay]] = d.meas_val[m_ay]
     fin = np.isfinite(ay_meas)
     ay_s = np.full(len(d.t), np.nan)
-    ay_s[fin] = _moving_average_t(d.t[fin], ay_meas[fin], 0.5)
+    ay_s[fin] = centred_moving_average(d.t[fin], ay_meas[fin], 0.5)
     series = [("nominal", result.nominal, "tab:red")]
     ev, label = _with_effects(result)
     if ev is not None:

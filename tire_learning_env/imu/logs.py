@@ -62,6 +62,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..io import DrivingLog, LogFormatError, read_log, row_gaps
+from ..metrics import centred_moving_average
 from ..observer._kernel import V_FLOOR
 from ..params import VehicleParams
 
@@ -158,8 +159,8 @@ def accelerometer_at_cg(t: NDArray, ay: NDArray, yaw_rate: NDArray, imu_x: float
 
     A rigid body's point ``x`` ahead of the CG has the lateral acceleration ``a_y + x r_dot``;
     this returns ``ay - imu_x * r_dot`` with ``r_dot`` the centred derivative (``np.gradient``
-    over ``t``) of the yaw rate's ``smooth_s`` moving mean (missing yaw-rate samples
-    interpolated for the derivative only). NaN ``ay`` stays NaN.
+    over ``t``) of the yaw rate's ``smooth_s`` moving mean (:func:`..metrics.centred_moving_average`;
+    missing yaw-rate samples interpolated for the derivative only). NaN ``ay`` stays NaN.
 
     Parameters
     ----------
@@ -186,13 +187,7 @@ def accelerometer_at_cg(t: NDArray, ay: NDArray, yaw_rate: NDArray, imu_x: float
     ok = np.isfinite(r)
     if ok.sum() < 3:
         return ay.copy()
-    r = np.interp(t, t[ok], r[ok])
-    dt = float(np.median(np.diff(t)))
-    w = max(1, int(round(smooth_s / dt)) // 2 * 2 + 1)
-    if w > 1:
-        pad = w // 2
-        rp = np.concatenate([np.full(pad, r[0]), r, np.full(pad, r[-1])])
-        r = np.convolve(rp, np.ones(w) / w, mode="valid")
+    r = centred_moving_average(t, np.interp(t, t[ok], r[ok]), smooth_s)
     r_dot = np.gradient(r, t)
     return ay - imu_x * r_dot
 

@@ -362,23 +362,8 @@ def _estimate_once(
     physics_dt: float | None = None,
     cache: bool = True,
 ) -> EstimationResult:
-    """One estimate with the basis centred on ``vehicle``'s stiffness (:func:`estimate`).
-
-    Parameters
-    ----------
-    sensors : mapping of str -> array
-        ``t, delta, vx`` (``ax`` optional) and the camera (``kappa`` or ``psi_dot_des``,
-        ``e1``, ``e2``) and/or IMU (``ay``, ``yaw_rate``) columns; NaN = no sample. No
-        ``true_*`` (refused).
-    vehicle : VehicleParams
-        Nominal vehicle (the vehicle file).
-    camera : CameraParams, optional
-        A camera specification the user trusts: its noise std and latency are used instead
-        of being estimated.
-    config : ObserverConfig, optional
-    physics_dt : float, optional
-        Prediction step after the last row [s]; default the median row spacing.
-    """
+    """One estimate with the basis centred on ``vehicle``'s stiffness; the parameters are
+    :func:`estimate`'s (``vehicle`` may be the re-centred one)."""
     config = config or ObserverConfig()
     t_all = time.perf_counter()
     runtime: dict = {}
