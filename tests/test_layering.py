@@ -104,3 +104,15 @@ def test_simulate_command_does_not_depend_on_the_analysis_package():
     found = _imports(PACKAGE / "commands" / "simulate.py")
     assert "tire_learning_env.scenarios" in found  # the check reads this file's imports at all
     assert not sorted(m for m in found if m.split(".")[:2] == ["tire_learning_env", "discrepancy"]), found
+
+
+#: Issue 20: no module of the package is longer than this (a longer one holds more than one idea).
+MAX_MODULE_LINES = 600
+
+
+def test_no_module_is_longer_than_600_lines():
+    """Every ``.py`` file of the package has at most :data:`MAX_MODULE_LINES` lines."""
+    lengths = {p.relative_to(PACKAGE).as_posix(): len(p.read_text().splitlines()) for p in PACKAGE.rglob("*.py")}
+    assert len(lengths) > 50  # the walk found the package
+    long = {name: n for name, n in lengths.items() if n > MAX_MODULE_LINES}
+    assert not long, f"modules over {MAX_MODULE_LINES} lines (split them by idea): {long}"

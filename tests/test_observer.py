@@ -571,7 +571,9 @@ def test_offline_variance_is_the_same_for_one_direction_or_a_grid_of_them(monkey
     A = B @ B.T + nw * np.eye(nw)
     fit = O.OfflineFit(np.zeros(nw), A, 0.1 * np.eye(nw), np.linalg.inv(A), None, [], 0, n, scores=scores)
     g = rng.standard_normal((3 * O.nw_columns_per_fft(n) + 5, nw))
-    monkeypatch.setattr(O, "NW_KEPT_LAGS", 64)  # a second sweep whenever the bandwidth is beyond 63 lags
+    from tire_learning_env.observer import longrun
+
+    monkeypatch.setattr(longrun, "NW_KEPT_LAGS", 64)  # a second sweep whenever the bandwidth is beyond 63 lags
     grid = fit.variance(g)
     u = scores.astype(float) @ np.linalg.solve(A, g.T)
     model = np.einsum("ij,ji->i", g, np.linalg.solve(A, g.T))

@@ -4,8 +4,8 @@ The estimator itself is :mod:`tire_learning_env.observer` with ``sensors="imu"``
 package is the IMU *log layer*:
 
 - :mod:`.logs`: checks and causal cleaning of real IMU logs, reported.
-- :mod:`.estimate`: :func:`estimate_imu` (noise, observer, linear KF, blend) and
-  :func:`estimate_imu_log` (the ``estimate`` command: scores and files).
+- :mod:`.estimate`: :func:`estimate_imu` (noise, observer, linear KF, blend);
+- :mod:`.outputs`: :func:`estimate_imu_log` (the ``estimate`` command: cleaning, scores and files).
 - :mod:`.blend`: interacting-multiple-model weighting of the observer and the linear KF by
   their innovations (never worse than the KF where the prediction errors tell them apart).
 - :mod:`.scoring`: sideslip RMSE and measured tire curves from a reference sensor.
@@ -18,8 +18,9 @@ The linear Kalman filter lives in :mod:`tire_learning_env.baselines.kalman` (re-
 
 from ..baselines.kalman import LinearKalmanBaseline, LinearKalmanFilter
 from .blend import Blend, BlendParams, blend_traces, causal_fallback_rows, file_not_contradicted, mode_probabilities
-from .estimate import ESTIMATE_COLUMNS, ImuEstimate, estimate_imu, estimate_imu_log, imu_config, imu_noise_std
+from .estimate import ESTIMATE_COLUMNS, ImuEstimate, estimate_imu, imu_config, imu_noise_std
 from .logs import CleaningReport, clean_imu_log, read_imu_log
+from .outputs import estimate_imu_log
 from .simulate import simulate_imu_drive
 
 __all__ = [

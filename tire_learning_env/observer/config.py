@@ -65,7 +65,7 @@ class ObserverConfig(_Params):
     prior_length : float
         Length scale [deg] of the smooth-curve prior of the offline fit. The bands add how much
         the answer moves at the neighbouring lengths of the grid 0.25, 0.5, 1, 2 deg that the
-        log's evidence cannot rule out (:func:`.offline.select_prior_length`). Choosing the
+        log's evidence cannot rule out (:func:`.prior_length.select_prior_length`). Choosing the
         length by the evidence was measured worse on the generalisation benchmark's tuning
         family (median stiffness error 0.93 % against 0.51 %).
     online_prior_length : float, optional

@@ -49,7 +49,8 @@ from .gains import synthesize_gains
 from .latency import _estimate_latency, _profile_window  # noqa: F401  (_profile_window: re-exported)
 from .model import MeasurementModel, measurement_model
 from .neuro_adaptive import HealthParams, NeuroAdaptiveObserver
-from .offline import hold_fit, refine, select_prior_length
+from .offline import hold_fit, refine
+from .prior_length import select_prior_length
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
 from .sensitivity import prefetch_window_baseline, steering_hold_sensitivity, yaw_dynamics_check
 

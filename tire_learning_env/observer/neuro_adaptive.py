@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..params import ParameterError, VehicleParams
 from . import _kernel as K
 from .basis import SoftClipBasis
+from .block_law import BlockLaw
 from .gains import ObserverGains
 from .model import MeasurementModel, StateIndex
 from .rows import CHANNELS, _KernelRows, sensor_rows
@@ -49,7 +50,7 @@ __all__ = ["NeuroAdaptiveObserver", "AdaptationParams", "HealthParams", "sensor_
 N_BIAS_PARAMS = 2
 
 
-class NeuroAdaptiveObserver:
+class NeuroAdaptiveObserver(BlockLaw):
     """Neuro-adaptive estimator of the states and the tire-force weights, for any sensor set.
 
     Parameters
@@ -398,143 +399,6 @@ class NeuroAdaptiveObserver:
         st.hs[K.HS_TRIPS] = trips
         st.hs[[K.HS_N_CKPT, K.HS_CKPT_HEAD]] = ck
         st.hist_meta[:] = 0
-
-    # -- the "block" causal law (AdaptationParams.causal_update) ---------------------------------
-    def _block_state(self) -> dict:
-        if self._block is None:
-            P0 = self.prior_covariance(offline=True)
-            Lam = np.linalg.inv(P0)
-            Lam = 0.5 * (Lam + Lam.T)
-            w = self._state.w.copy()
-            nw = self.n_weights
-            self._block = {
-                "A": Lam, "c": Lam @ self.initial_weights, "w_run": w,
-                "acc": K.Accumulator(np.zeros((nw, nw)), np.zeros(nw), np.zeros(4), np.empty((0, 2))),
-                "t_end": None, "healthy": True, "blocks": 0, "used": 0,
-                "verdicts": [],  # per closed block: (t_end, stiffness (2), std (2)), the causal verdict's data
-            }  # fmt: skip
-            self._state.pw[:] = P0
-        return self._block
-
-    def _close_block(self) -> None:
-        """End of a block: one Gauss-Newton step of the fit over all blocks so far."""
-        from .offline import _solve_step  # the box-projected Newton step of the offline fit
-
-        b = self._block
-        acc = b["acc"]
-        b["blocks"] += 1
-        if b["healthy"] and acc.stats[1] > 0:
-            H = 0.5 * (acc.hess + acc.hess.T)
-            b["A"] = b["A"] + H
-            b["c"] = b["c"] + H @ b["w_run"] + acc.grad
-            w = self._state.w.copy()
-            lo, hi = self._weight_box()
-            A = 0.5 * (b["A"] + b["A"].T)
-            try:
-                dw = _solve_step(A, b["c"] - A @ w, w, lo, hi)
-                cov = np.linalg.inv(A)
-            except np.linalg.LinAlgError:
-                dw, cov = np.zeros_like(w), None
-            if cov is not None and np.all(np.isfinite(dw)):
-                self._state.w[:] = w + dw
-                self._state.x[:] += self._state.ups @ dw  # the state follows its weights (sensitivity)
-                self._state.pw[:] = 0.5 * (cov + cov.T)
-                b["used"] += 1
-        if b["healthy"] and acc.stats[2] >= 20:  # the predictor's process noise, made consistent block by block
-            nis = float(acc.stats[0] / acc.stats[2])
-            load = 0.5 * self.vehicle.m * 9.81
-            lo_fe, hi_fe = 1e-4 * load, 3e-2 * load  # the offline fit's continuation range
-            if nis > 1.3:
-                self._adapt_force_error(min(self.force_error * 2.0, hi_fe))
-            elif nis < 1.0:
-                self._adapt_force_error(max(self.force_error / 1.5, lo_fe))
-        b["verdicts"].append(self._causal_stiffness(b["t_end"]))
-        b["w_run"] = self._state.w.copy()
-        b["acc"] = K.Accumulator(np.zeros_like(acc.hess), np.zeros_like(acc.grad), np.zeros(4), np.empty((0, 2)))
-        b["healthy"] = True
-        b["t_end"] += self.adaptation.block_s
-
-    def _causal_stiffness(self, t_end: float) -> tuple:
-        """``(t_end, (Cf, Cr), (std_f, std_r))`` at a block's end: the per-tire stiffness of the curve
-        the block law holds from then on (slope at zero, :func:`.readout.stiffness_gradient`: the
-        whole-log read-out needs the slip of the whole log) and its standard deviation from the fit's
-        weight covariance over all blocks so far (the data of rows before ``t_end`` only)."""
-        from .readout import stiffness_gradient  # readout imports this module
-
-        b = self._block
-        if "g_stiffness" not in b:
-            b["g_stiffness"] = np.vstack([stiffness_gradient(self, i) for i in (0, 1)])
-        G = b["g_stiffness"]
-        k = np.array([self.vehicle.Cf, self.vehicle.Cr]) + G @ self._state.w
-        s = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", G, self._state.pw, G), 0.0))
-        return float(t_end), (float(k[0]), float(k[1])), (float(s[0]), float(s[1]))
-
-    def causal_stiffness(self) -> dict:
-        """The block law's causal stiffness verdict data, one entry per closed block
-        (:meth:`_causal_stiffness`): ``t`` (nb,) block ends [s], ``value`` and ``std`` (nb, 2) per
-        tire [N/rad]. Empty arrays before the first block closes or under the ``"rls"`` law."""
-        v = (self._block or {}).get("verdicts", [])
-        return {"t": np.array([x[0] for x in v], dtype=float),
-                "value": np.array([x[1] for x in v], dtype=float).reshape(-1, 2),
-                "std": np.array([x[2] for x in v], dtype=float).reshape(-1, 2)}  # fmt: skip
-
-    def _run_blocks(self, sensors: Mapping[str, ArrayLike], predict_last: bool, compute_std: bool,
-                    store_weights: bool) -> EstimateTrace:  # fmt: skip
-        """:meth:`run` with the ``"block"`` law: the weights held within a block, the Kalman
-        predictor accumulating the block's prediction-error normal equations, one
-        Gauss-Newton step over all blocks at each block end (:class:`AdaptationParams`)."""
-        rows = sensor_rows(sensors, self.model)
-        t = rows["t"]
-        n = len(t)
-        if n and self._t0 is None:
-            self._t0 = float(t[0])
-        b = self._block_state()
-        fit_from = (self._t0 or 0.0) + self.settle_s
-        if b["t_end"] is None:
-            b["t_end"] = fit_from + self.adaptation.block_s
-        pieces: list[EstimateTrace] = []
-        held: list[NDArray] = []  # the weights each piece held (a piece's rows all carry them)
-        k = 0
-        while k < n:
-            while t[k] >= b["t_end"]:
-                self._close_block()
-            j = max(int(np.searchsorted(t, b["t_end"], side="left")), k + 1)
-            last = j >= n
-            piece = _KernelRows({c: v[k:j] for c, v in rows.items()})  # validated once, above
-            held.append(self._state.w.copy())
-            tr = self.run(piece, predict_last=predict_last if last else False, mode="fixed", accumulator=b["acc"],
-                          accumulate_from=fit_from, gate=25.0, compute_std=compute_std, store_weights=False,
-                          kalman=True)  # fmt: skip
-            h = tr.health
-            if np.any((h == K.HEALTH_NO_DATA) | (h == K.HEALTH_INCONSISTENT) | (h == K.HEALTH_DIVERGED)):
-                b["healthy"] = False  # adaptation frozen while the health flag is tripped
-            pieces.append(tr)
-            if not last and float(t[j] - t[j - 1]) <= self.segment_gap_s:  # to the next row, as run() would
-                # have predicted inside one call (across a pause nothing: run() restarts the state there)
-                dt_j = float(t[j] - t[j - 1])
-                d0, d1 = float(rows["delta"][j - 1]), float(rows["delta"][j])
-                ramp = (d1 - d0) / dt_j if (self.steering_hold == "ramp" and dt_j > 0 and np.isfinite(d1)) else 0.0
-                self.predict(dt_j, d0, float(rows["vx"][j - 1]), float(rows["kappa"][j - 1]), float(rows["ax"][j - 1]),
-                             float(self._state.hs[K.HS_KAPPA_RATE]), ramp)  # fmt: skip
-                self.t = float(t[j])
-            k = j
-        if not pieces:
-            return self.run(sensors, predict_last, mode="fixed", compute_std=compute_std, store_weights=store_weights)
-        # the per-row weights from the weights each piece held, written once (the pieces do not store them:
-        # on a 30 min, 100 Hz log that was 55 MB per copy, and concatenating held two)
-        lengths = [len(p.t) for p in pieces]
-        weights = np.repeat(np.vstack(held), lengths, axis=0) if store_weights else np.empty((0, self.n_weights))
-        if len(pieces) == 1:
-            pieces[0].weights = weights
-            pieces[0].meta["causal_stiffness"] = self.causal_stiffness()
-            return pieces[0]
-        first = pieces[0]
-        arrays = {f: np.concatenate([getattr(p, f) for p in pieces]) for f in
-                  ("t", "state", "slip", "force", "force_nonlinear", "std", "health", "innovation", "nis",
-                   "vx", "kappa")}  # fmt: skip
-        del pieces
-        meta = dict(first.meta, causal_stiffness=self.causal_stiffness())  # the blocks' verdict data (causal)
-        return EstimateTrace(**arrays, weights=weights, state_names=first.state_names, meta=meta)
 
     def predict(self, dt: float | None = None, delta: float = 0.0, vx: float | None = None, kappa: float = 0.0,
                 ax: float = 0.0, kappa_rate: float = 0.0, steering_rate: float = 0.0) -> "NeuroAdaptiveObserver":  # fmt: skip

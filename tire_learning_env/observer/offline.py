@@ -32,12 +32,12 @@ The *learned slip range* of each axle is where the curve's two-sigma band is wit
 from __future__ import annotations
 
 import copy
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .longrun import NW_KEPT_LAGS, _newey_west_columns, newey_west_variance, nw_columns_per_fft  # noqa: F401  (re-exported)
 from .neuro_adaptive import NeuroAdaptiveObserver, axle_index
 from .passes import _nis_per_dof, _pass, innovation_whiteness, pass_pieces, pass_threads  # noqa: F401  (re-exported)
 from .readout import curve_gradient, stiffness_gradient, stiffness_readout
@@ -45,102 +45,6 @@ from .trace import EstimateTrace
 
 __all__ = ["OfflineFit", "PendingFit", "refine", "stiffness_gradient", "curve_gradient", "newey_west_variance", "innovation_whiteness",
            "hold_fit", "pass_pieces", "pass_threads"]
-
-
-def newey_west_variance(u: NDArray, max_lag: int | None = None) -> NDArray:
-    """Long-run variance of the sum of each column of ``u`` (n, d) (Newey-West, Bartlett).
-
-    The bandwidth is the lag where the mean absolute autocorrelation of the columns first
-    drops below ``2/sqrt(n)`` (their noise level), times 4, at least ``4 n^(2/9)`` and at
-    most ``n/4``.
-
-    Parameters
-    ----------
-    u : (n, d) array
-        The series (e.g. the scores of a fit projected on ``d`` directions).
-    max_lag : int, optional
-        The Bartlett bandwidth; default chosen from ``u`` as above.
-
-    Returns
-    -------
-    (d,) ndarray
-        ``sum_l w_l sum_k u_k u_{k+l}`` over lags ``|l| <= max_lag`` (``u`` centred).
-    """
-    u = np.asarray(u, dtype=float)
-    if u.shape[0] < 8:
-        return np.sum(u**2, axis=0)
-    return _newey_west_columns(lambda c0, c1: u[:, c0:c1].T, u.shape[0], u.shape[1], max_lag)
-
-
-#: Lags of each column's autocovariance kept while the bandwidth is not yet known (:func:`_newey_west_columns`):
-#: a bandwidth beyond them (rare: scores correlated over more than 1/4 of these lags) costs a second sweep.
-NW_KEPT_LAGS = 16384
-
-
-def _nw_fft_length(n: int, lags: int) -> int:
-    """FFT length for the first ``lags`` autocovariances of ``n`` rows without wrap-around."""
-    import scipy.fft as sfft
-
-    return sfft.next_fast_len(n + lags - 1, real=True)
-
-
-def nw_columns_per_fft(n: int) -> int:
-    """Columns that :func:`newey_west_variance` transforms together on ``n`` rows (its memory block)."""
-    return max(1, int(2**22 // _nw_fft_length(n, n // 4 + 1)))
-
-
-def _newey_west_columns(columns, n: int, d: int, max_lag: int | None = None) -> NDArray:
-    """:func:`newey_west_variance` of the ``d`` series that ``columns(c0, c1)`` returns as rows ((c1 - c0, n)
-    arrays, made a block of series at a time: the caller need not hold all of ``u``).
-
-    Each column's autocovariance ``sum_k u_k u_{k+l}`` comes from one FFT of length at least
-    ``n + L`` (the ``L`` lags that can be used, at most ``n/4 + 1``: linear, not circular,
-    correlation there), on :func:`.passes.pass_threads` threads (scipy's pocketfft: the same
-    transform as numpy's). The bandwidth reads the mean absolute autocorrelation only up to the
-    lag ``n/16``: from there on ``4 x lag`` reaches the cap ``n/4`` whatever the lag is. Against
-    FFTs of twice the log's length over every lag (before 2026-11-29) the variances agree to
-    rounding (at most 8e-16 relative; the ``estimate`` command's files on a 300 s, 1 kHz log identical),
-    and the eleven variance calls of that command (stiffness, learned slip range, curve file, plot:
-    1526 directions) take 12-16 s instead of 58-69 s (CPU 16-17 s instead of 51 s).
-    """
-    import scipy.fft as sfft
-
-    keep_all = n // 4 + 1 if max_lag is None else min(max_lag + 1, n)  # the lags that can be used
-    n_rho = -(-(n // 4) // 4) if max_lag is None else 0  # lags whose autocorrelation can decide the bandwidth
-    kept = min(keep_all, NW_KEPT_LAGS)
-    nfft = _nw_fft_length(n, keep_all)
-    workers = pass_threads()
-    step = max(1, int(2**22 // nfft))  # columns per FFT: a few tens of MB whatever the log length
-    out = np.empty(d)
-    acov = None if max_lag is not None else np.empty((kept, d))
-    rho_sum = np.zeros(n_rho)
-    w = None
-    if max_lag is not None:
-        lags = np.arange(1, max_lag + 1)
-        w = 1.0 - lags / (max_lag + 1.0)
-    for c in range(0, d, step):
-        x = np.asarray(columns(c, min(c + step, d)), dtype=float)
-        x = x - x.mean(axis=1, keepdims=True)
-        F = sfft.rfft(x, nfft, axis=1, workers=workers)
-        del x
-        a = sfft.irfft(F * np.conj(F), nfft, axis=1, workers=workers)[:, :keep_all].T  # (lags, columns)
-        del F
-        if max_lag is None:
-            rho_sum += np.sum(np.abs(a[:n_rho] / np.maximum(a[0], 1e-300)), axis=1)
-            acov[:, c : c + step] = a[:kept]
-        else:
-            out[c : c + step] = a[0] + 2.0 * np.sum(w[:, None] * a[1 : max_lag + 1], axis=0)
-    if max_lag is not None:
-        return out
-    rho = rho_sum / d
-    below = np.flatnonzero(rho < 2.0 / math.sqrt(n))
-    first = int(below[0]) if len(below) else n // 4  # none below up to n/16: the cap, as any later lag gives
-    max_lag = int(min(max(4 * first, 4 * n ** (2.0 / 9.0)), n // 4))
-    if max_lag + 1 > kept:  # a bandwidth beyond the kept lags: a second sweep with it
-        return _newey_west_columns(columns, n, d, max_lag)
-    lags = np.arange(1, max_lag + 1)
-    w = 1.0 - lags / (max_lag + 1.0)
-    return acov[0] + 2.0 * np.sum(w[:, None] * acov[1 : max_lag + 1], axis=0)
 
 
 @dataclass
@@ -216,7 +120,7 @@ class OfflineFit:
     def prior_sensitivity(self, g: NDArray) -> NDArray:
         """Sensitivity variance of ``g^T w``: per assumption the log cannot settle, the largest
         squared change among its plausible alternatives (the prior length,
-        :func:`select_prior_length`; the steering hold,
+        :func:`.prior_length.select_prior_length`; the steering hold,
         :func:`.sensitivity.steering_hold_sensitivity`; the yaw dynamics when the log rejects
         the vehicle file's, :func:`.sensitivity.yaw_dynamics_check`; the process noise where the
         innovations showed the model's own error, :func:`refine`), summed over the assumptions."""
@@ -598,96 +502,6 @@ def _final_fit(observer, sensors, w, Lam, fit_from, gate, costs, iterations) -> 
     return fit
 
 
-def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit,
-                        lengths: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0), gate: float = 25.0,
-                        max_iter: int = 2, tol: float = 1e-3, min_decrease: float = 1e-2,
-                        plausible_nats: float = 5.0, choose: bool = True) -> tuple[OfflineFit, dict]:  # fmt: skip
-    """The smooth-curve prior's length scale [deg] chosen by the log's evidence (type-II maximum likelihood).
-
-    The prior :meth:`~.basis.SoftClipBasis.slope_prior` correlates the slopes of neighbouring
-    segments; a length too long for the tire pulls the curve toward a straight line through the
-    range the drive excited, so the slope at zero (the stiffness) comes out low on a
-    saturating curve (measured on a low-order Pacejka race car: -0.83 / -0.61 % at 1 deg,
-    -0.19 / -0.22 % at 0.5 deg). No single length suits every tire and drive, so the log
-    decides: with the data's quadratic model at the fit (``D(w*+d) = D* - 2 g^T d + d^T H d``,
-    ``H``, ``g`` the normal equations of the final pass) the evidence of a prior ``Lambda``
-    is, up to a constant, ``-(J + log det(H + Lambda) - log det(Lambda)) / 2`` with ``J`` the
-    minimum of the posterior cost (the Laplace approximation). The best length is refitted
-    with at most ``max_iter`` Gauss-Newton passes; the observer's adaptation settings take it.
-
-    The neighbouring lengths of the grid whose evidence is within ``plausible_nats`` of the
-    best (a Bayes factor below e^5, short of "very strong" on the Kass-Raftery scale) are
-    answers the log cannot rule out (with ``choose=False`` the configured length is kept and
-    its neighbours are judged against it; a neighbour the log prefers is always plausible):
-    their weight differences are kept
-    (``fit.prior_alternatives``) and :meth:`OfflineFit.variance` adds the largest squared
-    change of a functional among them to its variance (a prior-sensitivity term).
-    """
-    from dataclasses import replace as _replace
-
-    if getattr(fit, "data_grad", None) is None:
-        return fit, {"chosen_deg": observer.adaptation.prior_length, "evidence": None}
-    lo, hi = observer._weight_box()
-    a0 = observer.adaptation
-    w_star = fit.weights
-    w0 = np.zeros_like(w_star)
-    H = fit.hessian - fit.prior_precision
-    H = 0.5 * (H + H.T)
-    g = fit.data_grad
-    evidence: dict = {}
-    solutions: dict = {}
-    best = None
-    for length in lengths:
-        observer.adaptation = _replace(a0, prior_length=float(length))
-        P = observer.prior_covariance(offline=True)
-        observer.adaptation = a0
-        Lam = np.linalg.inv(P)
-        Lam = 0.5 * (Lam + Lam.T)
-        A = H + Lam
-        try:
-            d = _solve_step(A, g - Lam @ (w_star - w0), w_star, lo, hi)
-            sa, lda = np.linalg.slogdet(A)
-            sl, ldl = np.linalg.slogdet(Lam)
-        except np.linalg.LinAlgError:
-            continue
-        if sa <= 0 or sl <= 0:
-            continue
-        w = w_star + d
-        J = fit.data_cost - 2.0 * float(g @ d) + float(d @ H @ d) + float((w - w0) @ Lam @ (w - w0))
-        ev = -0.5 * (J + lda - ldl)
-        evidence[f"{length:g}"] = ev
-        solutions[float(length)] = (ev, w)
-        if best is None or ev > best[0]:
-            best = (ev, float(length), w, Lam)
-    info = {"method": "evidence (Laplace) of the smooth-curve prior's length scale", "evidence_by_length_deg": evidence,
-            "chosen_deg": a0.prior_length}  # fmt: skip
-    if not choose and float(a0.prior_length) in solutions:  # keep the configured length
-        ev_c, w_c = solutions[float(a0.prior_length)]
-        best = (ev_c, float(a0.prior_length), w_c, None)
-    if best is not None:  # the plausible neighbouring lengths: how much the answer leans on the choice
-        grid = sorted(solutions)
-        i = grid.index(best[1])
-        near = [grid[j] for j in (i - 1, i + 1) if 0 <= j < len(grid) and best[0] - solutions[grid[j]][0] <= plausible_nats]
-        fit.prior_alternatives = [solutions[x][1] - best[2] for x in near]
-        info["plausible_neighbours_deg"] = near
-    if best is None or abs(best[1] - a0.prior_length) < 1e-12:
-        return fit, info
-    _, length, w, Lam = best
-    info["chosen_deg"] = length
-    observer.adaptation = _replace(a0, prior_length=length)
-    t = np.asarray(sensors["t"], dtype=float)
-    fit_from = float(t[0]) + observer.settle_s
-    w, _, costs, it = _gauss_newton(observer, sensors, w, w0, Lam, lo, hi, fit_from, gate, max_iter, tol, min_decrease)
-    new = _final_fit(observer, sensors, w, Lam, fit_from, gate, list(fit.cost) + costs, fit.iterations + it)
-    new.force_error = fit.force_error
-    new.force_error_calibration = fit.force_error_calibration
-    new.prior_alternatives = getattr(fit, "prior_alternatives", [])
-    new.hold_alternatives = getattr(fit, "hold_alternatives", [])
-    new.dynamics_alternatives = getattr(fit, "dynamics_alternatives", [])
-    new.mismatch_alternatives = getattr(fit, "mismatch_alternatives", [])
-    return new, info
-
-
 def pem_cost(observer: NeuroAdaptiveObserver, sensors: dict, w: NDArray, prior_cov: NDArray | None = None,
              gate: float = 25.0) -> tuple[float, int]:  # fmt: skip
     """Cost after one Gauss-Newton step from ``w``: ``J - g^T A^-1 g`` (the quadratic model's
@@ -705,4 +519,4 @@ def pem_cost(observer: NeuroAdaptiveObserver, sensors: dict, w: NDArray, prior_c
         return J, int(acc.stats[1])
 
 
-__all__ += ["pem_cost", "axle_index", "stiffness_readout", "calibrate_force_error", "select_prior_length"]
+__all__ += ["pem_cost", "axle_index", "stiffness_readout", "calibrate_force_error"]
