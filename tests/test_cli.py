@@ -212,3 +212,64 @@ def test_estimate_without_the_offline_pass_scores_the_causal_one(tmp_path, short
     assert main(["estimate", str(short_log), "--out", str(out), "--no-offline", "-q"]) == 0
     gt = json.loads((out / "metrics.json").read_text())["ground_truth"]
     assert "online" not in gt and set(gt["stiffness_inside_2sigma_band"]) == {"front", "rear"}
+
+
+# --- issue 16: the fused run writes the linear KF baseline and its reference scores -------------------
+
+
+def _columns(path) -> dict:
+    import csv
+
+    rows = list(csv.DictReader(path.open()))
+    return {c: np.array([float(r[c]) if r[c] != "" else np.nan for r in rows]) for c in rows[0]}
+
+
+def test_fused_estimate_writes_the_imu_paths_kf_baseline_and_reference_scores(tmp_path, short_log, capsys):
+    """--sensors both: estimates.csv holds beta_kf (the IMU-only path's KF, the same numbers on the same rows,
+    the vehicle file's imu_x applied), metrics.json the sideslip RMSE of the fused estimate and the KF against
+    the log's true_beta (recomputed here from the written columns), with the comparison flagged; a camera-only
+    run writes none of it. Before 2026-11-29 the fused run wrote neither."""
+    import csv
+
+    vehicle = tmp_path / "v.json"
+    vehicle.write_text(json.dumps(dict(VEHICLE, imu_x=0.5)))
+    fused = tmp_path / "fused"
+    capsys.readouterr()
+    assert main(["estimate", str(short_log), "--out", str(fused), "--sensors", "both", "--latency", "0",
+                 "--vehicle", str(vehicle)]) == 0  # fmt: skip
+    printed = capsys.readouterr().out
+    est, log = _columns(fused / "estimates.csv"), _columns(short_log)
+    m = json.loads((fused / "metrics.json").read_text())
+    assert {"beta_hat", "beta_observer_online", "beta_kf"} <= set(est) and set(m["estimates_csv"]) == {
+        "beta_hat", "beta_observer_online", "beta_kf"}
+    assert m["baseline_linear_kf"]["cleaning"]["imu_position"]["imu_x_m"] == 0.5
+    ref = m["reference_scores"]
+    t, beta_ref = log["t"], log["true_beta"]
+    mid = 0.5 * (t[0] + t[-1])
+    parts = {"whole": np.ones(len(t), bool), "first_half": t < mid, "second_half": t >= mid}
+    for key, column in (("observer_refined", "beta_hat"), ("observer_online_causal", "beta_observer_online"),
+                        ("linear_kf_baseline", "beta_kf")):  # fmt: skip
+        for part, sel in parts.items():
+            rmse = np.degrees(np.sqrt(np.mean((est[column][sel] - beta_ref[sel]) ** 2)))
+            assert ref["sideslip_rmse_deg"][key][part] == pytest.approx(rmse, rel=1e-6), (key, part)
+    rep, kf = ref["sideslip_rmse_deg"]["observer_refined"], ref["sideslip_rmse_deg"]["linear_kf_baseline"]
+    cmp = ref["reported_vs_linear_kf"]
+    assert cmp["reported"] == "observer_refined"
+    assert cmp["reported_worse_than_linear_kf"] == {p: rep[p] > kf[p] for p in parts}
+    assert ref["targets"]["reported_no_worse_than_linear_kf"] == (rep["whole"] <= kf["whole"])
+    assert f"linear_kf_baseline {kf['whole']:.3f}" in printed and "beta_kf" in printed
+    # the IMU-only path on the same rows (camera columns dropped) writes the same KF
+    rows = list(csv.DictReader(short_log.open()))
+    imu = tmp_path / "imu.csv"
+    with imu.open("w", newline="") as f:
+        w = csv.DictWriter(f, [c for c in rows[0] if c not in ("e1", "e2", "kappa")], extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    assert main(["estimate", str(imu), "--out", str(tmp_path / "imu"), "--vehicle", str(vehicle), "--no-offline",
+                 "-q"]) == 0  # fmt: skip
+    np.testing.assert_array_equal(_columns(tmp_path / "imu" / "estimates.csv")["beta_kf"], est["beta_kf"])
+    # camera only: none of it
+    cam = tmp_path / "cam"
+    assert main(["estimate", str(short_log), "--out", str(cam), "--latency", "0", "-q"]) == 0
+    assert "beta_kf" not in _columns(cam / "estimates.csv")
+    assert not {"reference_scores", "baseline_linear_kf"} & set(json.loads((cam / "metrics.json").read_text()))

@@ -621,3 +621,23 @@ def test_imu_fit_decides_what_the_steering_did_between_rows(steering, hold):
     k = np.array(res.core.cornering_stiffness())
     assert np.all(np.abs(k / np.array([tv.Cf, tv.Cr]) - 1.0) < 0.03), k / np.array([tv.Cf, tv.Cr]) - 1.0
     assert _rmse_deg(res.blend.beta, truth["true_beta"]) < _rmse_deg(res.kalman.beta, truth["true_beta"])
+
+
+def test_sideslip_scores_flag_a_reported_estimate_worse_than_the_linear_kf(capsys):
+    """The comparison the IMU-only and fused runs write (imu.scoring.sideslip_scores) and print: a reported
+    sideslip 0.5 deg off where the KF is 0.1 deg off is flagged worse on every part, on line too."""
+    from tire_learning_env.commands.estimate import _reference_text
+    from tire_learning_env.imu.scoring import sideslip_scores
+
+    t = np.linspace(0.0, 10.0, 101)
+    ref = 0.02 * np.sin(t)
+    betas = {"observer_refined": ref + np.radians(0.5), "observer_online_causal": ref - np.radians(0.05),
+             "linear_kf_baseline": ref + np.radians(0.1)}  # fmt: skip
+    s = sideslip_scores(t, ref, betas, "observer_refined", "observer_online_causal")
+    assert s["sideslip_rmse_deg"]["observer_refined"]["first_half"] == pytest.approx(0.5)
+    cmp = s["reported_vs_linear_kf"]
+    assert cmp["reported_worse_than_linear_kf"] == {"whole": True, "first_half": True, "second_half": True}
+    assert cmp["online_worse_than_linear_kf"] == {"whole": False, "first_half": False, "second_half": False}
+    assert cmp["reported_minus_linear_kf_deg"]["whole"] == pytest.approx(0.4)
+    assert s["targets"] == {"reported_no_worse_than_linear_kf": False, "online_no_worse_than_linear_kf": True}
+    assert "observer_refined is WORSE than the linear KF" in _reference_text({"reference_scores": s})

@@ -33,7 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "camera latency and cornering stiffness are estimated from the log unless given. Writes DIR/estimates.csv, "
         "DIR/metrics.json (summary with +/-2 sigma bands and the identifiability verdict; what was estimated and "
         "what was assumed; ground-truth scores when true_* columns exist, which the estimator never reads), "
-        "DIR/tire_curves.csv and DIR/tire_curves.png.",
+        "DIR/tire_curves.csv and DIR/tire_curves.png. IMU-only and fused (--sensors both) runs also write the linear "
+        "Kalman filter baseline (beta_kf) and, with a reference sideslip column, its RMSE beside the estimate's.",
     )
     p.add_argument("log", type=Path, help="driving log (CSV in the shared format)")
     p.add_argument("--out", type=Path, required=True, help="output directory")
@@ -135,11 +136,28 @@ def _imu_line(out: Path, metrics: dict) -> str:
     summ = metrics.get("summary", {})
     if summ:
         line += "; " + _stiffness_text(summ)
+    return line + _reference_text(metrics)
+
+
+def _reference_text(metrics: dict) -> str:
+    """The printed line's part on the reference sideslip scores (IMU-only and fused runs; empty without them)."""
     ref = metrics.get("reference_scores")
-    if ref and "sideslip_rmse_deg" in ref:
-        parts = [f"{k} {v['whole']:.3f}" for k, v in ref["sideslip_rmse_deg"].items() if isinstance(v, dict) and "whole" in v]
-        line += "; sideslip RMSE [deg]: " + ", ".join(parts)
-    return line
+    if not ref or "sideslip_rmse_deg" not in ref:
+        return ""
+    parts = [f"{k} {v['whole']:.3f}" for k, v in ref["sideslip_rmse_deg"].items() if isinstance(v, dict) and "whole" in v]
+    text = "; sideslip RMSE [deg]: " + ", ".join(parts)
+    comparison = ref.get("reported_vs_linear_kf") or {}
+    if comparison.get("reported_worse_than_linear_kf", {}).get("whole"):
+        text += f" (the reported {comparison['reported']} is WORSE than the linear KF)"
+    return text
+
+
+def _fused_kf_text(metrics: dict) -> str:
+    """The printed line's part on a fused run's linear KF baseline."""
+    kf = metrics["baseline_linear_kf"]
+    if "skipped" in kf:
+        return f"; no linear KF baseline ({kf['skipped']})"
+    return "; linear KF baseline in estimates.csv (beta_kf)" + _reference_text(metrics)
 
 
 def _stiffness_text(summary: dict) -> str:
@@ -183,6 +201,11 @@ def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
         sensors = dict(sensors, ay=accelerometer_at_cg(sensors["t"], sensors["ay"], sensors["yaw_rate"], imu_x))
         log.notes.append(f"ay: accelerometer {imu_x:+g} m ahead of the CG (vehicle file imu_x): ay - imu_x * r_dot used")
     result = estimate(sensors, vehicle, None, config=config)
+    baseline = None
+    if getattr(config, "sensors", "camera") == "both":  # the IMU path's linear KF beside the fused estimate
+        from ..imu.fused import fused_linear_kf
+
+        baseline = fused_linear_kf(log, vehicle, config, result.observer.segment_gap_s)
     trace = result.trace
     online = result.online
     summary = result.summary()
@@ -244,6 +267,12 @@ def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
         }
         gt["note"] = "true curve = binned mean of the log's true (slip, force) samples; true stiffness = its slope near zero"
         metrics["ground_truth"] = gt
+    if baseline is not None:
+        from ..imu.fused import FUSED_BETA_COLUMNS, fused_reference_scores
+
+        metrics["baseline_linear_kf"] = baseline.metrics
+        metrics["estimates_csv"] = {k: v for k, v in FUSED_BETA_COLUMNS.items() if k != "beta_kf" or baseline.trace is not None}
+        metrics["reference_scores"] = fused_reference_scores(log, trace, online, baseline.trace)
     with atomic_directory(args.out) as out:
         cols = {"t": trace.t}
         names = ("e1_hat", "e1_dot_hat", "e2_hat", "e2_dot_hat")
@@ -255,6 +284,10 @@ def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
         if trace.std.size:
             cols.update(vy_std=trace.std[:, StateIndex.VY], yaw_rate_std=trace.std[:, StateIndex.R])
         cols.update(health=online.health.astype(float), alpha_f_online=online.slip[:, 0], alpha_r_online=online.slip[:, 1])
+        if baseline is not None:
+            cols.update(beta_hat=trace.beta, beta_observer_online=online.beta)
+            if baseline.trace is not None:
+                cols["beta_kf"] = baseline.trace.beta
         write_table(out / "estimates.csv", cols)
         grid = np.radians(np.linspace(-8, 8, 161))
         write_table(out / "tire_curves.csv", {
@@ -272,6 +305,8 @@ def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
     lat = calibration.get("latency", {})
     if lat.get("source", "").startswith("estimated"):
         line += f"; camera latency estimated {1e3 * lat['latency_s']:.0f} ms"
+    if baseline is not None:
+        line += _fused_kf_text(metrics)
     print(line)
     return 0
 

@@ -6,6 +6,8 @@ package is the IMU *log layer*:
 - :mod:`.logs`: checks and causal cleaning of real IMU logs, reported.
 - :mod:`.estimate`: :func:`estimate_imu` (noise, observer, linear KF, blend);
 - :mod:`.outputs`: :func:`estimate_imu_log` (the ``estimate`` command: cleaning, scores and files).
+- :mod:`.baseline`: the linear KF on a log's IMU rows, as the IMU-only and the fused paths run it.
+- :mod:`.fused`: that KF and the reference sideslip scores beside a fused (camera and IMU) estimate.
 - :mod:`.blend`: interacting-multiple-model weighting of the observer and the linear KF by
   their innovations (never worse than the KF where the prediction errors tell them apart).
 - :mod:`.scoring`: sideslip RMSE and measured tire curves from a reference sensor.

@@ -48,7 +48,7 @@ from ..observer.calibration import IMU_NOISE_WINDOW_S, estimate_noise_std
 from ..observer.model import check_sensor_columns
 from ..params import ParameterError, VehicleParams
 from .blend import Blend, BlendParams, blend_traces, causal_fallback_rows, file_not_contradicted
-from .logs import MIN_SPEED
+from .baseline import linear_kf_baseline
 
 __all__ = ["ESTIMATE_COLUMNS", "NOISE_WINDOW_S", "ImuEstimate", "imu_config", "imu_noise_std", "estimate_imu"]
 
@@ -102,6 +102,21 @@ def imu_noise_std(t: ArrayLike, ay: ArrayLike, yaw_rate: ArrayLike, window_s: fl
         "std": list(std),
     }
     return (std[0], std[1]), info
+
+
+def imu_noise(rows: Mapping[str, NDArray], given: tuple[float, float] | None) -> tuple[tuple[float, float], dict]:
+    """The IMU noise every estimator of a log uses: ``given`` (``ObserverConfig.imu_noise``), else
+    :func:`imu_noise_std` of the rows.
+
+    Returns
+    -------
+    (ay_std, r_std), info
+        ``info`` says how, for ``metrics.json``.
+    """
+    if given is None:
+        return imu_noise_std(rows["t"], rows["ay"], rows["yaw_rate"])
+    noise = tuple(given)
+    return (noise[0], noise[1]), {"source": "given (ObserverConfig.imu_noise)", "std": list(noise)}
 
 
 @dataclass
@@ -219,15 +234,11 @@ def estimate_imu(
     rows = _rows(sensors)
     t_all = time.perf_counter()
     runtime: dict = {}
+    t0 = time.perf_counter()
+    noise, noise_info = imu_noise(rows, config.imu_noise)
     if config.imu_noise is None:
-        t0 = time.perf_counter()
-        noise, noise_info = imu_noise_std(rows["t"], rows["ay"], rows["yaw_rate"])
         config = config.replace(imu_noise=noise)
         runtime["noise"] = time.perf_counter() - t0
-    else:
-        noise = tuple(config.imu_noise)
-        noise_info = {"source": "given (ObserverConfig.imu_noise)", "std": list(noise)}
-    noise_used = (max(noise[0], 0.01), max(noise[1], 1e-4))  # the core's floors
     core = estimate(rows, vehicle, config=config, cache=cache)
     runtime["observer"] = core.runtime_s
     params = blend or BlendParams()
@@ -238,14 +249,8 @@ def estimate_imu(
         alt = estimate(rows, vehicle, config=config.replace(causal_update=OTHER_LAW[law], offline=False), cache=cache)
         other = (f"observer_{OTHER_LAW[law]}", alt.online)
         runtime["observer_other_causal_law"] = time.perf_counter() - t0
-    dt = float(np.median(np.diff(rows["t"])))
     t0 = time.perf_counter()
-    kf = LinearKalmanFilter(vehicle, noise_std=noise_used, physics_dt=dt)
-    # the KF's own speed floor (1 m/s) makes its forward-Euler step unstable at standstill for a stiff car or a
-    # slow log (1 - dt (Cf + Cr) / (m v) < -1); the observer's floor V_FLOOR keeps it stable where the IMU
-    # samples are not used anyway (logs.MIN_SPEED)
-    ktrace = _kf_by_segment(kf, dict(rows, vx=np.maximum(rows["vx"], MIN_SPEED)), core.observer.segment_gap_s,
-                            vehicle, noise_used, dt)  # fmt: skip
+    ktrace, kf = linear_kf_baseline(rows, vehicle, noise, core.observer.segment_gap_s)
     runtime["linear_kf"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     # the refined pass used the whole log: its mode probabilities may too (smoothed); the causal one stays causal
@@ -267,25 +272,3 @@ def estimate_imu(
     return ImuEstimate(core, ktrace, kf, b_final, b_online, noise_info, runtime, params,
                        online_other_law=other[1] if other else None, blend_fallback=fallback,
                        online_fallback=online_fallback)  # fmt: skip
-
-
-def _kf_by_segment(kf: LinearKalmanFilter, rows: dict, gap_s: float, vehicle: VehicleParams, noise, dt: float):
-    """The linear KF over ``rows``; after each pause longer than ``gap_s`` [s] (the observer's
-    ``segment_gap_s``) a fresh filter starts, as at the start of the log (its forward-Euler step across
-    a pause of seconds is unstable, and nothing was measured there). ``kf`` runs the first segment."""
-    t = rows["t"]
-    cuts = (np.flatnonzero(np.diff(t) > gap_s) + 1).tolist() if math.isfinite(gap_s) else []
-    if not cuts:
-        return kf.run(rows)
-    parts = []
-    for i, (a, b) in enumerate(zip([0] + cuts, cuts + [len(t)])):
-        f = kf if i == 0 else LinearKalmanFilter(vehicle, noise_std=noise, physics_dt=dt)
-        parts.append(f.run({k: v[a:b] for k, v in rows.items()}, predict_last=b == len(t)))
-    fields = ("t", "state", "slip", "force", "force_nonlinear", "std", "health", "innovation", "nis", "vx", "kappa")
-    out = {f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}
-    return EstimateTrace(**out, weights=parts[0].weights, state_names=parts[0].state_names,
-                         meta=dict(parts[0].meta, segments=len(parts),
-                                   beta=np.concatenate([p.meta["beta"] for p in parts])))  # fmt: skip
-
-
-# -- the estimate command on an IMU log -------------------------------------------------------------

@@ -37,6 +37,7 @@ __all__ = [
     "measured_tire_data",
     "MeasuredCurve",
     "sideslip_rmse_deg",
+    "sideslip_scores",
     "split_masks",
     "reference_beta",
     "near_zero_stiffness",
@@ -150,6 +151,53 @@ def sideslip_rmse_deg(beta_hat: NDArray, beta_ref: NDArray, masks: dict[str, NDA
     """RMSE [deg] of the sideslip estimate on every mask (all rows, no burn-in)."""
     err = np.degrees(np.asarray(beta_hat, dtype=float) - np.asarray(beta_ref, dtype=float))
     return {k: float(np.sqrt(np.nanmean(err[m] ** 2))) for k, m in masks.items()}
+
+
+def sideslip_scores(t: NDArray, beta_ref: NDArray, estimates: dict[str, NDArray], reported: str, online: str) -> dict:
+    """Sideslip RMSE of every estimate against the reference, and of the reported one beside the linear KF's.
+
+    The part of ``metrics.json``'s ``reference_scores`` that the IMU-only and the fused ``estimate``
+    paths share (same keys, so one reader handles both).
+
+    Parameters
+    ----------
+    t : array (n,)
+        Row times [s]; the halves split at the middle time (:func:`split_masks`).
+    beta_ref : array (n,)
+        Reference sideslip [rad] (:func:`reference_beta`).
+    estimates : dict of str -> array (n,)
+        Sideslip [rad] of each estimator, ``linear_kf_baseline`` among them.
+    reported : str
+        The key of ``estimates`` the command reports.
+    online : str
+        The key of the causal estimate (what a car gets on line).
+
+    Returns
+    -------
+    dict
+        ``note``, ``split_time_s``, ``sideslip_rmse_deg`` (per estimator: ``whole``, ``first_half``,
+        ``second_half``), ``reported_vs_linear_kf`` (``reported``, ``online``, the RMSE difference
+        reported - KF [deg] and ``reported_worse_than_linear_kf`` per part, the same for ``online``) and
+        ``targets`` (``reported_no_worse_than_linear_kf``, ``online_no_worse_than_linear_kf``: whole log).
+    """
+    masks = split_masks(t)
+    rmse = {name: sideslip_rmse_deg(beta, beta_ref, masks) for name, beta in estimates.items()}
+    kf = rmse["linear_kf_baseline"]
+    comparison: dict = {"reported": reported, "online": online}
+    for role, name in (("reported", reported), ("online", online)):
+        comparison[f"{role}_minus_linear_kf_deg"] = {k: rmse[name][k] - kf[k] for k in masks}
+        comparison[f"{role}_worse_than_linear_kf"] = {k: bool(rmse[name][k] > kf[k]) for k in masks}
+    return {
+        "note": "reference sensor columns (true_vy/true_beta) used here only; all rows scored, no burn-in; halves "
+        "split at the middle time of the log",
+        "split_time_s": float(0.5 * (t[0] + t[-1])),
+        "sideslip_rmse_deg": rmse,
+        "reported_vs_linear_kf": comparison,
+        "targets": {
+            "reported_no_worse_than_linear_kf": bool(rmse[reported]["whole"] <= kf["whole"]),
+            "online_no_worse_than_linear_kf": bool(rmse[online]["whole"] <= kf["whole"]),
+        },
+    }
 
 
 def near_zero_stiffness(data: MeasuredTireData, mask: NDArray | None = None, limit: float = math.radians(1.0)) -> dict:
