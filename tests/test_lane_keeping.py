@@ -77,6 +77,27 @@ def test_info_carries_ground_truth():
     assert info["truth_log"]["true_state"].shape == (50, 4)
 
 
+def test_observation_entries_are_what_their_names_say():
+    """The base observation is listed positionally (per step); each OBSERVATION_NAMES entry holds its value."""
+    from tire_learning_env.envs._base import NO_FRAME_AGE, OBSERVATION_NAMES
+
+    env = gym.make("TireLearning-Cornering-v0")
+    obs, _ = env.reset(seed=0)
+    at = {name: float(obs[i]) for i, name in enumerate(OBSERVATION_NAMES)}
+    assert (at["e1"], at["e2"], at["frame_age"]) == (0.0, 0.0, NO_FRAME_AGE)  # no frame yet
+    for _ in range(200):
+        obs, _, _, _, info = env.step(np.array([0.01], dtype=np.float32))
+    at = {name: float(obs[i]) for i, name in enumerate(OBSERVATION_NAMES)}
+    sim, log = env.unwrapped.sim, info["sensor_log"]
+    framed = np.flatnonzero(np.isfinite(log["e1"]))[-1]
+    f32 = lambda x: float(np.float32(x))  # noqa: E731
+    assert at["e1"] == f32(log["e1"][framed]) and at["e2"] == f32(log["e2"][framed])
+    assert at["frame_age"] == f32(sim.t - sim.camera.latest_time) and 0.0 <= at["frame_age"] < 0.1
+    assert at["vx"] == f32(env.unwrapped.vehicle.vx)
+    assert at["kappa"] == f32(sim.table.lookup(sim.s)[0]) and at["kappa"] != 0.0  # on the arc
+    assert at["last_delta"] == f32(log["delta"][-1])
+
+
 def test_lane_departure_terminates():
     env = gym.make("TireLearning-LaneKeeping-v0", road="straight", action_mode="full")
     env.reset(seed=0)

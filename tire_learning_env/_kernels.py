@@ -302,32 +302,41 @@ def guard_steering(delta, delta_prev, guard):
     return delta
 
 
-#: Log columns of the true error state, in ``S_E1..S_E2_DOT`` order (written before the step).
-_TRUE_STATE_COLUMNS = (LOG_TRUE_E1, LOG_TRUE_E1_DOT, LOG_TRUE_E2, LOG_TRUE_E2_DOT)
-#: Log columns :func:`record_tick` writes, in the order of its value arguments (``t`` .. ``s``).
-_TICK_COLUMNS = (
-    LOG_T, LOG_DELTA, LOG_VX, LOG_AX, LOG_KAPPA, LOG_PSI_DOT_DES, LOG_PSI_DDOT_DES, LOG_E1, LOG_E2,
-    LOG_YAW_RATE, LOG_AY, LOG_ALPHA_F, LOG_ALPHA_R, LOG_FYF, LOG_FYR, LOG_S,
-)  # fmt: skip
-
-
 @njit(cache=True, inline="always")
 def record_true_state(out, j, state):
     """Write the true error state ``state[:4]`` (before the step) into row ``j`` of a tick log."""
-    for k in range(len(_TRUE_STATE_COLUMNS)):
-        out[j, _TRUE_STATE_COLUMNS[k]] = state[S_E1 + k]
+    out[j, LOG_TRUE_E1] = state[S_E1]
+    out[j, LOG_TRUE_E1_DOT] = state[S_E1_DOT]
+    out[j, LOG_TRUE_E2] = state[S_E2]
+    out[j, LOG_TRUE_E2_DOT] = state[S_E2_DOT]
 
 
 @njit(cache=True, inline="always")
 def record_tick(out, j, t, delta, vx, ax, kappa, p0, q0, delivered, f1, f2, r, ay, af, ar, Fyf, Fyr, s):
     """Fill row ``j`` of a tick log (:data:`LOG_COLUMNS`) except the true state (written before
     the step, :func:`record_true_state`); camera columns are NaN when no frame was delivered.
-    The one row writer of the compiled and the Python tick loops (every value a float)."""
-    e1 = f1 if delivered else math.nan
-    e2 = f2 if delivered else math.nan
-    values = (t, delta, vx, ax, kappa, p0, q0, e1, e2, r, ay, af, ar, Fyf, Fyr, s)
-    for k in range(len(_TICK_COLUMNS)):
-        out[j, _TICK_COLUMNS[k]] = values[k]
+    The one row writer of the compiled and the Python tick loops (every value a float).
+
+    One named store per column, not a loop over a tuple of columns: with the loop form (and the
+    three inlined knot searches, :func:`advance_ticks` Notes) the road-table ticks ran 2-5 %
+    slower (issue 20, ``benchmarks/results/env_step_ab_issue20.json``).
+    """
+    out[j, LOG_T] = t
+    out[j, LOG_DELTA] = delta
+    out[j, LOG_VX] = vx
+    out[j, LOG_AX] = ax
+    out[j, LOG_KAPPA] = kappa
+    out[j, LOG_PSI_DOT_DES] = p0
+    out[j, LOG_PSI_DDOT_DES] = q0
+    out[j, LOG_E1] = f1 if delivered else math.nan
+    out[j, LOG_E2] = f2 if delivered else math.nan
+    out[j, LOG_YAW_RATE] = r
+    out[j, LOG_AY] = ay
+    out[j, LOG_ALPHA_F] = af
+    out[j, LOG_ALPHA_R] = ar
+    out[j, LOG_FYF] = Fyf
+    out[j, LOG_FYR] = Fyr
+    out[j, LOG_S] = s
 
 
 @njit(cache=True, inline="always")
@@ -433,6 +442,19 @@ def curvature_at(s, source, curve_a, curve_b, curve_ds):
 
 
 @njit(cache=True)
+def _knot_lookups(s0, s1, s2, ks, kv):
+    """:func:`knot_lookup` at the start, middle and end of a tick: ``k0, dk0, k1, dk1, k2, dk2``.
+
+    A call of its own from :func:`advance_ticks`, so the knot search is not inlined three times
+    into the loop body, where it slowed the road-table ticks too (:func:`advance_ticks` Notes).
+    """
+    k0, dk0 = knot_lookup(s0, ks, kv)
+    k1, dk1 = knot_lookup(s1, ks, kv)
+    k2, dk2 = knot_lookup(s2, ks, kv)
+    return k0, dk0, k1, dk1, k2, dk2
+
+
+@njit(cache=True)
 def advance_ticks(
     n_ticks, dt, tick0, state, s0, vx0, ax,
     veh, tf, tr, tabf, tabr, eff,                           # plant: BicyclePlant.kernel_params()
@@ -509,6 +531,12 @@ def advance_ticks(
     Python loop of the base simulator with a speed profile omits the ``ax dt^2/8`` term
     (:func:`~tire_learning_env.simulation.advance_ticks_python`, ``midpoint_ax_factor``); with
     ``ax = 0`` the two agree to the bit.
+
+    The three curvature lookups of a tick share one branch on ``curve_source`` (the table's
+    inlined, the knots' one call, :func:`_knot_lookups`) instead of three :func:`curvature_at`
+    calls. With the knot search inlined three times and :func:`record_tick` a loop over a tuple
+    of columns, the road-table ticks ran 2-5 % slower than with both changes (the same process,
+    alternating calls of 60 000 ticks; issue 20, ``benchmarks/results/env_step_ab_issue20.json``).
     """
     s = s0
     vx = vx0
@@ -520,10 +548,15 @@ def advance_ticks(
         t = (tick0 + j) * dt
         vx_mid = vx + 0.5 * dt * ax
         vx_end = vx + dt * ax
-        k0, dk0 = curvature_at(s, curve_source, curve_a, curve_b, curve_ds)
-        k1, dk1 = curvature_at(s + 0.5 * dt * vx + 0.125 * dt * dt * ax, curve_source, curve_a, curve_b, curve_ds)
+        s_mid = s + 0.5 * dt * vx + 0.125 * dt * dt * ax
         s_end = s + 0.5 * dt * (vx + vx_end)
-        k2, dk2 = curvature_at(s_end, curve_source, curve_a, curve_b, curve_ds)
+        # curvature_at at the three RK4 stages, with one branch per tick (see the Notes)
+        if curve_source == CURVATURE_TABLE:
+            k0, dk0 = road_lookup(s, curve_a, curve_b, curve_ds)
+            k1, dk1 = road_lookup(s_mid, curve_a, curve_b, curve_ds)
+            k2, dk2 = road_lookup(s_end, curve_a, curve_b, curve_ds)
+        else:
+            k0, dk0, k1, dk1, k2, dk2 = _knot_lookups(s, s_mid, s_end, curve_a, curve_b)
         delivered, f1, f2 = camera_tick(t, state[S_E1], state[S_E2], cam, cstate, counters, pending, noise, drop)
         delta_prev = delta
         if steering != steering:

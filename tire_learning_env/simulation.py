@@ -283,6 +283,12 @@ class Simulator:
 
 
 _NO_KNOTS = np.zeros(0)  # the running curvature integral a road table does not need
+# log_from_rows' columns, looked up once (it runs at every env step): (key, column) of each sensor
+# entry, the column ranges of the slip, force and true-state entries
+_SENSOR_COLUMNS = tuple((key, LOG_INDEX[key]) for key in SENSOR_KEYS)
+_SLIP_COLUMNS = slice(LOG_INDEX["alpha_f"], LOG_INDEX["alpha_r"] + 1)
+_FORCE_COLUMNS = slice(LOG_INDEX["Fyf"], LOG_INDEX["Fyr"] + 1)
+_TRUE_STATE_COLUMNS = slice(LOG_INDEX["true_e1"], LOG_INDEX["true_e2_dot"] + 1)
 
 
 def log_from_rows(out: NDArray, vehicle: VehicleParams) -> tuple[dict[str, NDArray], dict[str, NDArray]]:
@@ -290,16 +296,15 @@ def log_from_rows(out: NDArray, vehicle: VehicleParams) -> tuple[dict[str, NDArr
 
     ``true_force_nonlinear`` is ``F_y - 2 C alpha`` with the nominal ``vehicle``'s stiffness.
     """
-    col = LOG_INDEX
-    sensors = {key: out[:, col[key]].copy() for key in SENSOR_KEYS}
-    slip = out[:, col["alpha_f"] : col["alpha_r"] + 1].copy()
-    force = out[:, col["Fyf"] : col["Fyr"] + 1].copy()
+    sensors = {key: out[:, j].copy() for key, j in _SENSOR_COLUMNS}
+    slip = out[:, _SLIP_COLUMNS].copy()
+    force = out[:, _FORCE_COLUMNS].copy()
     truth = {
-        "true_state": out[:, col["true_e1"] : col["true_e2_dot"] + 1].copy(),
+        "true_state": out[:, _TRUE_STATE_COLUMNS].copy(),
         "true_slip": slip,
         "true_force": force,
         "true_force_nonlinear": force - slip * np.array([2.0 * vehicle.Cf, 2.0 * vehicle.Cr]),
-        "s": out[:, col["s"]].copy(),
+        "s": out[:, LOG_INDEX["s"]].copy(),
     }
     return sensors, truth
 

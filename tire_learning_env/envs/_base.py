@@ -54,6 +54,12 @@ OBSERVATION_BOUNDS: dict[str, tuple[float, float] | None] = {
     "last_delta": None,  # [rad], +/- driver.max_steering
 }
 
+#: The order in which :meth:`TireLearningEnv._base_observation` lists its values (positionally,
+#: as it runs at every env step); checked here against :data:`OBSERVATION_NAMES`.
+_OBSERVATION_ORDER = ("e1", "e2", "frame_age", "vx", "kappa", "last_delta")
+if OBSERVATION_NAMES != _OBSERVATION_ORDER:  # a guard for whoever edits the names
+    raise ImportError(f"OBSERVATION_NAMES {OBSERVATION_NAMES} differ from _base_observation's order {_OBSERVATION_ORDER}")
+
 #: Frame age observed before the camera delivered its first frame [s] (the bound: saturated).
 NO_FRAME_AGE = 10.0
 
@@ -267,30 +273,40 @@ class TireLearningEnv(gym.Env):
             raise ValueError(f"action must be finite, got {a[0]!r} (NaN or infinite steering)")
         return float(a[0])
 
+    def _clip_steering(self, value: float) -> float:
+        """``value`` [rad] clipped to the action box, as ``np.clip`` clips it (a float between
+        the box's float32 bounds), without numpy's dispatch for one number."""
+        space = self.action_space
+        return min(max(value, float(space.low[0])), float(space.high[0]))
+
     def _base_observation(self, camera, t: float, vx: float, kappa: float, last_delta: float) -> list[float]:
-        """The :data:`OBSERVATION_NAMES` values (unclipped): the camera's latest frame and its age at ``t``."""
+        """The :data:`OBSERVATION_NAMES` values (unclipped): the camera's latest frame and its age at ``t``.
+
+        Listed positionally in :data:`OBSERVATION_NAMES` order (``_OBSERVATION_ORDER``, checked
+        against the names on import): a dict by name and a lookup per name cost about 0.5 us of an
+        env step (issue 20, ``benchmarks/results/env_step_ab_issue20.json``).
+        """
         e1, e2 = camera.latest
         if e1 != e1:  # no frame delivered yet (at reset): zeros with the saturated age
             e1, e2, age = 0.0, 0.0, NO_FRAME_AGE
         else:
             age = t - camera.latest_time
-        values = {"e1": e1, "e2": e2, "frame_age": age, "vx": vx, "kappa": kappa, "last_delta": last_delta}
-        return [values[name] for name in OBSERVATION_NAMES]
+        return [e1, e2, age, vx, kappa, last_delta]
 
     def _clip_observation(self, values) -> NDArray[np.float32]:
-        return np.clip(np.array(values, dtype=np.float32), self._obs_low, self._obs_high)
+        """``values`` as float32, clipped to the observation bounds (``ndarray.clip``, which ``np.clip`` calls)."""
+        return np.array(values, dtype=np.float32).clip(self._obs_low, self._obs_high)
 
-    def _plant_truth(self) -> dict[str, Any]:
-        """Ground truth at the plant's current state from its ``output()`` (empty without one)."""
+    def _plant_truth(self, info: dict[str, Any]) -> dict[str, Any]:
+        """``info`` with the ground truth at the plant's current state from its ``output()`` added
+        (nothing without one); returns ``info``."""
         out = self.plant.output() if hasattr(self.plant, "output") else None
-        if out is None:
-            return {}
-        return {
-            "true_state": out.xi,
-            "true_slip": out.slip,
-            "true_force": out.force,
-            "true_force_nonlinear": out.force_nonlinear,
-        }
+        if out is not None:
+            info["true_state"] = out.xi
+            info["true_slip"] = out.slip
+            info["true_force"] = out.force
+            info["true_force_nonlinear"] = out.force_nonlinear
+        return info
 
     @property
     def estimator_inputs(self) -> dict[str, Any]:

@@ -301,7 +301,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
             self._pending_lane_action = int(a[0])
             return 0.0, math.nan
         requested = self._check_steering_action(action)
-        value = float(np.clip(requested, self.action_space.low[0], self.action_space.high[0]))
+        value = self._clip_steering(requested)
         return (value, math.nan) if self.action_mode == "offset" else (0.0, value)
 
     def _start_lane_change(self, index: tuple) -> None:

@@ -154,7 +154,7 @@ class LaneKeepingEnv(TireLearningEnv):
 
     def step(self, action):
         requested = self._check_steering_action(action)
-        value = float(np.clip(requested, self.action_space.low[0], self.action_space.high[0]))
+        value = self._clip_steering(requested)
         if self.action_mode == "offset":
             log = self.sim.advance(self.ticks_per_step, steering_offset=value)
         else:
@@ -185,11 +185,10 @@ class LaneKeepingEnv(TireLearningEnv):
 
     # -- helpers ------------------------------------------------------------------------
     def _observation(self) -> NDArray[np.float32]:
-        kappa, _ = self.sim.table.lookup(self.sim.s)
-        values = self._base_observation(self.sim.camera, self.sim.t, self.sim.speed_at(self.sim.t)[0], kappa, self.sim.last_delta)
+        sim = self.sim
+        kappa, _ = sim.table.lookup(sim.s)
+        values = self._base_observation(sim.camera, sim.t, sim.speed_at(sim.t)[0], kappa, sim.last_delta)
         return self._clip_observation(values)
 
     def _info_now(self) -> dict[str, Any]:
-        info: dict[str, Any] = {"t": self.sim.t}
-        info.update(self._plant_truth())
-        return info
+        return self._plant_truth({"t": self.sim.t})
