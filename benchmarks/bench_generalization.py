@@ -572,7 +572,9 @@ def _build_with_redraws(sc: dict, build_fn, summary_fn, record_error: dict | Non
     build_fn : callable
         ``sc -> built``, the simulated drive.
     summary_fn : callable
-        ``built -> truth summary``, a dict whose ``valid`` is False when the truth lost control.
+        ``built -> truth summary``, a dict whose ``valid`` is False when the truth lost control. A truth
+        plant that blew up (``FloatingPointError``: its state turned non-finite, e.g. the multi-body plant
+        spinning out) lost control too and is redrawn the same way.
     record_error : dict, optional
         A scenario runner's output: an exception of ``build_fn`` is then not raised but recorded there
         (``scenario``: the draw that raised, ``error``: stage ``simulate``, message and traceback), and
@@ -588,6 +590,16 @@ def _build_with_redraws(sc: dict, build_fn, summary_fn, record_error: dict | Non
     while True:
         try:
             built = build_fn(sc)
+        except FloatingPointError as exc:  # the truth plant blew up (non-finite state): it lost control
+            if sc.get("attempt", 0) < MAX_REDRAWS and "base_seed" in sc:
+                rejected.append({"scenario": sc, "truth_summary": {"valid": False, "blew_up": str(exc)[:300]}})
+                sc = sample_scenario(sc["family"], sc["index"], sc["base_seed"], sc["quick"], sc.get("attempt", 0) + 1)
+                continue
+            if record_error is None:
+                raise
+            record_error["scenario"] = sc
+            record_error["error"] = {"stage": "simulate", "message": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()[-1500:]}
+            return sc, None, None, rejected
         except Exception as exc:  # noqa: BLE001
             if record_error is None:
                 raise

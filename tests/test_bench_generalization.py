@@ -170,3 +170,20 @@ def test_imu_and_fused_scenarios_are_seeded_and_in_range(bg):
             assert imu["vibration"] is None and imu["ay_offset"] == 0.0 and imu["yaw_rate_offset"] == 0.0
         else:
             assert abs(imu["ay_offset"]) <= 0.5 and abs(imu["yaw_rate_offset"]) <= 0.01
+
+
+def test_a_truth_that_blows_up_is_redrawn_with_the_reason_kept(bg):
+    """Multi-body scenario 8 (seed 15) drives the CommonRoad truth into a spin at 21.3 s (steering at its
+    0.5 rad limit). Its kernels divided by a zero wheel speed and raised a bare ``ZeroDivisionError``, which
+    the benchmark recorded as a failed scenario; now the plant's state turns non-finite, the simulator
+    raises ``FloatingPointError`` naming the time, and the benchmark redraws the scenario like any other
+    truth that lost control, keeping the reason in ``rejected_draws``."""
+    sc = bg.sample_scenario("multi_body", 8, 15, False)
+    with pytest.raises(FloatingPointError, match="blew up at t="):
+        bg.build(sc)
+    out: dict = {}
+    kept, built, summary, rejected = bg._build_with_redraws(
+        sc, bg.build, lambda b: bg.truth_summary(b[0], b[1], sc), record_error=out)  # fmt: skip
+    assert "error" not in out and built is not None and summary["valid"]
+    assert kept["attempt"] == 1 and len(rejected) == 1
+    assert rejected[0]["truth_summary"]["valid"] is False and "blew up" in rejected[0]["truth_summary"]["blew_up"]

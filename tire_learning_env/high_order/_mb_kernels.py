@@ -95,7 +95,7 @@ N_AUX = 28
 _G = 9.81  # CommonRoad's gravity [m/s^2]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _steering_constraints(steering_angle, steering_velocity, p):
     if (steering_angle <= p[MB_SMIN] and steering_velocity <= 0) or (steering_angle >= p[MB_SMAX] and steering_velocity >= 0):
         steering_velocity = 0.0
@@ -106,7 +106,7 @@ def _steering_constraints(steering_angle, steering_velocity, p):
     return steering_velocity
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _acceleration_constraints(velocity, acceleration, p):
     if velocity > p[MB_VSW]:
         posLimit = p[MB_AMAX] * p[MB_VSW] / velocity
@@ -121,7 +121,7 @@ def _acceleration_constraints(velocity, acceleration, p):
     return acceleration
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _zero_if_negative(u):
     """``u * 0`` when ``u < 0`` (CommonRoad's ``u *= 0``: a negative wheel speed becomes -0.0), else ``u``."""
     if u < 0.0:
@@ -129,7 +129,7 @@ def _zero_if_negative(u):
     return u
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _unsprung_roll_moment(F_SL, F_SR, T, F_RA, h_ra, R_w, phi_u, F_zL, F_zR, K_lt, F_yL, F_yR, F_lat, z_u):
     """Roll moment sum [N m] on one axle's unsprung mass (``sumL_uf`` / ``sumL_ur`` of CommonRoad):
     suspension forces ``F_SL``, ``F_SR`` on track ``T``, compliant-joint force ``F_RA`` at height
@@ -145,7 +145,7 @@ def _unsprung_roll_moment(F_SL, F_SR, T, F_RA, h_ra, R_w, phi_u, F_zL, F_zR, K_l
     )
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def mb_rhs(x, u_steer_rate, u_accel, p, ty, use_lag, f, aux):
     """Right-hand side of CommonRoad's ``vehicle_dynamics_mb`` (29 states), ported.
 
@@ -420,7 +420,7 @@ def mb_rhs(x, u_steer_rate, u_accel, p, ty, use_lag, f, aux):
     aux[AUX_GAMMA + W_RR] = gamma_RR
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def plant_rhs(x, delta_cmd, v_ref, a_ff, p, ty, f, aux):
     """Truth-plant right-hand side: :func:`mb_rhs` + steering servo + relaxation lags + PI speed.
 
@@ -452,7 +452,7 @@ def plant_rhs(x, delta_cmd, v_ref, a_ff, p, ty, f, aux):
 N_TRUTH = 9
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def truth_from_rhs(x, f, aux, p, out):
     """Bicycle-level truth from a state and its derivative (SPEC §1 conventions).
 
@@ -476,7 +476,7 @@ def truth_from_rhs(x, f, aux, p, out):
     out[TR_DELTA] = d
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def plant_rk4_step(x, delta_cmd, dt, v_ref, a_ff, p, ty, work, aux, truth):
     """One classical RK4 step of the truth plant, in place on ``x`` (N_STATE,).
 
@@ -518,7 +518,7 @@ def plant_rk4_step(x, delta_cmd, dt, v_ref, a_ff, p, ty, work, aux, truth):
 
 
 # --- path geometry -------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _path_point(s, px, py, ph, pk, ds):
     """Position (cubic Hermite), heading and curvature (linear) of the path at ``s``."""
     u = s / ds
@@ -544,7 +544,7 @@ def _path_point(s, px, py, ph, pk, ds):
     return x, y, head, kap
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def path_errors(X, Y, psi, vx, vy, r, s_guess, px, py, ph, pk, ds):
     """Lane-camera errors of a pose relative to a tabulated path (exact Frenet kinematics).
 
@@ -577,7 +577,7 @@ def path_errors(X, Y, psi, vx, vy, r, s_guess, px, py, ph, pk, ds):
     return s, e1, e1_dot, e2, e2_dot
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def plant_tick(x, err, delta_cmd, dt, v_ref, a_ff, p, ty, work, aux, truth, s_guess, px, py, ph, pk, ds):
     """One physics tick: :func:`plant_rk4_step`, then the camera errors of the new pose.
 

@@ -25,7 +25,7 @@ from numba import njit
 N_TIRE = 32
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sign(x):
     if x > 0:
         return 1.0
@@ -34,13 +34,13 @@ def _sign(x):
     return 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _mf_angle(x, B, C, E):
     """The Magic Formula's angle ``C atan(B x - E (B x - atan(B x)))`` [rad] (every formula below)."""
     return C * math.atan(B * x - E * (B * x - math.atan(B * x)))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _pure_slip_coefficients(gamma, F_z, p_d1, p_d3, p_c1, p_e1, p_k1):
     """``(B, C, D, E, mu)`` of a pure-slip formula: friction ``mu = p_d1 (1 - p_d3 gamma^2)``,
     peak ``D = mu F_z`` [N], slip stiffness ``K = F_z p_k1``, ``B = K / (C D)``."""
@@ -53,7 +53,7 @@ def _pure_slip_coefficients(gamma, F_z, p_d1, p_d3, p_c1, p_e1, p_k1):
     return B, C, D, E, mu
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def pac_longitudinal(kappa, gamma, F_z, ty):
     """``formula_longitudinal``: pure-slip longitudinal force [N] (CommonRoad, ported)."""
     kappa = -kappa
@@ -64,7 +64,7 @@ def pac_longitudinal(kappa, gamma, F_z, ty):
     return D_x * math.sin(_mf_angle(kappa_x, B_x, C_x, E_x) + S_vx)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def pac_lateral(alpha, gamma, F_z, ty):
     """``formula_lateral``: pure-slip lateral force [N] and friction ``mu_y`` (CommonRoad, ported)."""
     sg = _sign(gamma)
@@ -76,7 +76,7 @@ def pac_lateral(alpha, gamma, F_z, ty):
     return F_y, mu_y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def pac_longitudinal_comb(kappa, alpha, F0_x, ty):
     """``formula_longitudinal_comb``: combined-slip longitudinal force [N] (CommonRoad, ported)."""
     S_hxalpha = ty[TY_RHX1]
@@ -88,7 +88,7 @@ def pac_longitudinal_comb(kappa, alpha, F0_x, ty):
     return D_xalpha * math.cos(_mf_angle(alpha_s, B_xalpha, C_xalpha, E_xalpha))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def pac_lateral_comb(kappa, alpha, gamma, mu_y, F_z, F0_y, ty):
     """``formula_lateral_comb``: combined-slip lateral force [N] (CommonRoad, ported)."""
     S_hykappa = ty[TY_RHY1]
@@ -102,7 +102,7 @@ def pac_lateral_comb(kappa, alpha, gamma, mu_y, F_z, F0_y, ty):
     return D_ykappa * math.cos(_mf_angle(kappa_s, B_ykappa, C_ykappa, E_ykappa)) + S_vykappa
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def tire_lateral_force(alpha, kappa, gamma, F_z, ty):
     """Combined-slip lateral force of one tire [N] as the multi-body model computes it."""
     F0_y, mu_y = pac_lateral(alpha, gamma, F_z, ty)
