@@ -327,7 +327,7 @@ def advance_ticks_python(
     *,
     s_stop: float = math.inf,
     feedforward_curvature: Callable[[float, float], float] | None = None,
-    lane_change: tuple[float, float, float] = (0.0, 0.0, 1.0),
+    lane_change: tuple[float, float, float] = NO_LANE_CHANGE,
     speed_profile: Callable[[float], tuple[float, float]] | None = None,
     midpoint_ax_factor: float = 0.125,
 ) -> tuple[float, float, float, int, int]:

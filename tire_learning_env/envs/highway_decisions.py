@@ -13,7 +13,11 @@ import numpy as np
 
 from highway_env.vehicle.kinematics import Vehicle as HighwayVehicle
 
-__all__ = ["EgoDecisions"]
+__all__ = ["EgoDecisions", "LANE_KEEP", "LANE_ID_MINUS_1", "LANE_ID_PLUS_1"]
+
+#: The discrete actions of ``lane_change="action"``: keep the lane, change to highway-env's lane
+#: id - 1 (its ``LANE_LEFT`` on screen), change to lane id + 1 (``LANE_RIGHT``).
+LANE_KEEP, LANE_ID_MINUS_1, LANE_ID_PLUS_1 = range(3)
 
 
 class EgoDecisions:
@@ -45,10 +49,10 @@ class EgoDecisions:
         return index
 
     def _try_lane_change(self, action: int) -> None:
-        self._pending_lane_action = 0
+        self._pending_lane_action = LANE_KEEP
         if self._lane_change_busy():
             return
-        index = self._side_lane(-1 if action == 1 else 1)
+        index = self._side_lane(-1 if action == LANE_ID_MINUS_1 else 1)
         if index is not None:
             self._start_lane_change(index)
 

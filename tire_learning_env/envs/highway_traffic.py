@@ -20,6 +20,7 @@ from .._kernels import (
     CURVATURE_KNOTS,
     LOG_AX,
     N_LOG,
+    NO_LANE_CHANGE,
     PEND_E1,
     PEND_E2,
     S_E1,
@@ -41,7 +42,7 @@ from ..params import ParameterError, VehicleParams, check_keys
 from ..sensors import Camera
 from ..simulation import Plant, advance_ticks_python, log_from_rows
 from ._base import COMMON_CONFIG_KEYS, TireLearningEnv, whole_rate_ratio
-from .highway_decisions import EgoDecisions
+from .highway_decisions import LANE_ID_MINUS_1, LANE_ID_PLUS_1, LANE_KEEP, EgoDecisions
 from .highway_ego import TruthEgoVehicle
 from .highway_lanes import SWITCH_JOIN, SWITCH_LANE_CHANGE, LaneReference, wrap_angle
 from .highway_rendering import make_viewer
@@ -52,6 +53,11 @@ __all__ = ["TrafficEnv", "TRAFFIC_FEATURE_NAMES", "LANE_ACTIONS"]
 TRAFFIC_FEATURE_NAMES = ("present", "ds", "dl", "dv")
 #: Meaning of the discrete action when ``lane_change="action"`` (highway-env's lane ids).
 LANE_ACTIONS = ("keep", "lane_id_minus_1", "lane_id_plus_1")
+assert (LANE_ACTIONS.index("keep"), LANE_ACTIONS.index("lane_id_minus_1"), LANE_ACTIONS.index("lane_id_plus_1")) == (
+    LANE_KEEP,
+    LANE_ID_MINUS_1,
+    LANE_ID_PLUS_1,
+)
 
 class LaneSwitch(NamedTuple):
     """A switch of the target lane during a step (``info["lane_switches"]``)."""
@@ -208,10 +214,10 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         self.ax = 0.0
         self.tick_index = 0
         self.last_delta = 0.0
-        self._lc = (0.0, 0.0, 1.0)  # lane-change path: offset [m], start s [m], length [m]
+        self._lc = NO_LANE_CHANGE  # lane-change path: offset [m], start s [m], length [m]
         self._corridor_origin = 0.0  # centre of the lane being left, in target-lane e1 [m]
         self._decided = False
-        self._pending_lane_action = 0
+        self._pending_lane_action = LANE_KEEP
         self.lane_changes = 0
         self.crashed = False
         self.departed = False
@@ -230,7 +236,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         row = 0
         ended = self.crashed or self.departed
         self._row = 0
-        if self.lane_change == "action" and self._pending_lane_action and not ended:
+        if self.lane_change == "action" and self._pending_lane_action != LANE_KEEP and not ended:
             self._try_lane_change(self._pending_lane_action)
         while row < self.ticks_per_step:
             self._row = row
@@ -296,7 +302,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
     def _parse_action(self, action) -> tuple[float, float]:
         if self.lane_change == "action":
             a = np.asarray(action).reshape(-1)
-            if a.size != 1 or not np.isfinite(a[0]) or a[0] != int(a[0]) or not 0 <= int(a[0]) <= 2:
+            if a.size != 1 or not np.isfinite(a[0]) or a[0] != int(a[0]) or not LANE_KEEP <= int(a[0]) <= LANE_ID_PLUS_1:
                 raise ValueError(f"action must be 0 (keep), 1 (lane id - 1) or 2 (lane id + 1), got {action!r}")
             self._pending_lane_action = int(a[0])
             return 0.0, math.nan
@@ -427,7 +433,8 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         e1 = float(self.plant.state[S_E1])
         d = self.departure_threshold
         o = self._corridor_origin
-        if o != 0.0 and self.s >= self._lc[1] + self._lc[2] and abs(e1) < d:
+        _, lc_s0, lc_len = self._lc
+        if o != 0.0 and self.s >= lc_s0 + lc_len and abs(e1) < d:
             self._corridor_origin = o = 0.0  # the manoeuvre is over: back to one lane
         if not (min(0.0, o) - d <= e1 <= max(0.0, o) + d):
             self.departed = True
