@@ -115,3 +115,11 @@ def test_basis_regressors_reproduce_the_basis_force(lane_change_log):
         X = basis_regressors(basis, slip[:, axle], axle)
         assert X.shape == (len(slip), basis.n_per_axle)
         np.testing.assert_allclose(X @ w.reshape(2, -1)[axle], basis.nonlinear_force(slip[:, axle], w, axle), rtol=1e-12)
+
+
+def test_state_columns_are_those_of_the_state_index():
+    """metrics.py sits below dynamics.py, so it names the error-state columns itself; they must agree."""
+    from tire_learning_env import metrics
+    from tire_learning_env.dynamics import StateIndex
+
+    assert (metrics.STATE_E1_DOT, metrics.STATE_E2_DOT) == (StateIndex.E1_DOT, StateIndex.E2_DOT)

@@ -38,6 +38,9 @@ __all__ = [
 ]  # fmt: skip
 
 AXLES = ("front", "rear")
+#: Columns of the error state ``[e1, e1_dot, e2, e2_dot]`` the metrics read (those of
+#: ``dynamics.StateIndex``, a layer above this module; ``tests/test_metrics.py`` checks they agree).
+STATE_E1_DOT, STATE_E2_DOT = 1, 3
 CurveFn = Callable[[NDArray, str], NDArray]
 
 
@@ -107,8 +110,8 @@ def bicycle_implied_axle_forces(
     """
     t = np.asarray(t, dtype=float)
     state = np.asarray(state, dtype=float)
-    e1_ddot = np.gradient(state[:, 1], t)
-    e2_ddot = np.gradient(state[:, 3], t)
+    e1_ddot = np.gradient(state[:, STATE_E1_DOT], t)
+    e2_ddot = np.gradient(state[:, STATE_E2_DOT], t)
     lateral = vehicle.m * (e1_ddot + np.asarray(vx, dtype=float) * np.asarray(psi_dot_des, dtype=float))
     yaw = vehicle.Iz * (e2_ddot + np.asarray(psi_ddot_des, dtype=float))
     wheelbase = vehicle.lf + vehicle.lr

@@ -9,12 +9,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..params import ParameterError
+from ._kernel_types import CH_AY, CH_E1, CH_E2, CH_R, N_CHANNELS
 from .model import MeasurementModel, check_sensor_columns
 
 __all__ = ["sensor_rows", "fill_path_curvature", "CHANNELS"]
 
 #: measurement channels in the order of the kernel's ``z`` columns
 CHANNELS = ("e1", "e2", "ay", "yaw_rate")
+assert (CHANNELS[CH_E1], CHANNELS[CH_E2], CHANNELS[CH_AY], CHANNELS[CH_R]) == ("e1", "e2", "ay", "yaw_rate")
 
 
 class _KernelRows(dict):
@@ -78,9 +80,9 @@ def sensor_rows(sensors: Mapping[str, ArrayLike], model: MeasurementModel) -> di
         kappa = fill_path_curvature(t, kappa)
     else:
         kappa = np.zeros(n)
-    z = np.full((n, 4), np.nan)
+    z = np.full((n, N_CHANNELS), np.nan)
     if model.uses_camera:
-        z[:, 0], z[:, 1] = get("e1"), get("e2")
+        z[:, CH_E1], z[:, CH_E2] = get("e1"), get("e2")
     if model.uses_imu:
-        z[:, 2], z[:, 3] = get("ay"), get("yaw_rate")
+        z[:, CH_AY], z[:, CH_R] = get("ay"), get("yaw_rate")
     return {"t": t, "delta": delta, "vx": vx, "ax": ax, "kappa": np.ascontiguousarray(kappa), "z": z}
