@@ -78,3 +78,76 @@ def test_fleet_extra_importable_in_ci():
 
     for module in ("ray", "pyarrow", "asammdf", "mcap", "rosbags", "yaml"):
         importlib.import_module(module)
+
+
+# --- DEVELOPING.md's map of where things live (issue 20 item 6) -------------------------------------------
+
+PACKAGE = ROOT / "tire_learning_env"
+
+
+def _developing_map() -> dict[str, list[str]]:
+    """The bullets of DEVELOPING.md's "Where things live": ``{folder or "tests": backticked names}``.
+
+    ``"tire_learning_env/"`` is the package root, ``"baselines/"`` ... a subpackage; the cross-cutting
+    bullet is stored under ``"tests"``.
+    """
+    text = (ROOT / "DEVELOPING.md").read_text()
+    start = text.index("## Where things live")
+    section = text[start : text.index("\n## ", start + 1)]
+    bullets = re.split(r"\n- ", section)[1:]
+    found = {}
+    for bullet in bullets:
+        names = re.findall(r"`([^`]+)`", bullet)
+        head = bullet.split(":", 1)[0].strip()
+        key = "tests" if head.startswith("Cross-cutting") else head.strip("`")
+        assert key not in found, f"DEVELOPING.md map: two bullets for {key}"
+        found[key] = names
+    return found
+
+
+def test_developing_map_names_every_module_and_test_file():
+    """Every module of the package is listed under its folder, and nothing else; every test file of
+    ``tests/`` is named (a top-level module next to its own ``test_<module>.py``), and each named exists."""
+    listed = _developing_map()
+    folders = {"tire_learning_env/"} | {f"{p.name}/" for p in PACKAGE.iterdir() if (p / "__init__.py").exists()}
+    assert set(listed) == folders | {"tests"}, "DEVELOPING.md map: one bullet per folder of the package"
+    named_tests = set()
+    for folder, names in listed.items():
+        modules = {n for n in names if n.endswith(".py") and not n.startswith("test_")}
+        named_tests |= {n for n in names if n.startswith("test_") and n.endswith(".py")}
+        if folder == "tests":
+            continue
+        path = PACKAGE if folder == "tire_learning_env/" else PACKAGE / folder
+        actual = {p.name for p in path.glob("*.py") if p.name != "__init__.py"}
+        assert modules == actual, (
+            f"DEVELOPING.md map, {folder}: not listed {sorted(actual - modules)}, no such module {sorted(modules - actual)}"
+        )
+        assert any(n.startswith("test_") for n in names), f"DEVELOPING.md map, {folder}: name its test files"
+    root_names = listed["tire_learning_env/"]
+    for module in (n for n in root_names if not n.startswith("test_") and n.endswith(".py")):
+        own = f"test_{module.lstrip('_')}"
+        assert own in root_names, f"DEVELOPING.md map: {module} without its {own}"
+    actual_tests = {p.name for p in (ROOT / "tests").glob("test_*.py")}
+    assert named_tests == actual_tests, (
+        f"DEVELOPING.md map: test files not named {sorted(actual_tests - named_tests)}, "
+        f"no such test file {sorted(named_tests - actual_tests)}"
+    )
+
+
+def test_developing_paths_exist():
+    """Every path DEVELOPING.md names (``observer/gains.py``, ``benchmarks/...``) exists, relative to the
+    repository or to the package, and so does every file it names bare (``gains.py``)."""
+    text = (ROOT / "DEVELOPING.md").read_text()
+    paths = {
+        tok
+        for quoted in re.findall(r"`([^`]+)`", text)
+        for tok in re.findall(r"[\w./-]+/[\w./-]+\.(?:py|md|json)\b", quoted)
+        if not tok.startswith("../")  # ../shared/: the workspace's shared specification, outside the repository
+    }
+    assert len(paths) > 20  # the scan found the paths
+    missing = sorted(p for p in paths if not (ROOT / p).exists() and not (PACKAGE / p).exists())
+    assert not missing, f"DEVELOPING.md names paths that do not exist: {missing}"
+    # a bare ``name.py`` is a module of the package, a test file, a benchmark or an example
+    bare = {tok for quoted in re.findall(r"`([^`]+)`", text) for tok in re.findall(r"(?<![\w/.])\w+\.py\b", quoted)}
+    known = {p.name for folder in (PACKAGE, ROOT / "tests", ROOT / "benchmarks", ROOT / "examples") for p in folder.rglob("*.py")}
+    assert not sorted(bare - known), f"DEVELOPING.md names files that do not exist: {sorted(bare - known)}"
