@@ -37,6 +37,7 @@ __all__ = [
     "PARAM_TYPES",
     "observation_bounds",
     "whole_rate_ratio",
+    "choice",
     "TRUTH_SEED_TAG",
 ]
 
@@ -118,6 +119,15 @@ def whole_rate_ratio(name: str, fast: float, slow: float) -> int:
     return int(round(ratio))
 
 
+def choice(args: Mapping[str, Any], key: str, options: tuple[str, ...]) -> str:
+    """``args[key]``, or :class:`ParameterError` naming ``key`` and ``options`` if it is not one of them."""
+    value = args[key]
+    if value not in options:
+        either = ", ".join(repr(o) for o in options[:-1]) + f" or {options[-1]!r}"
+        raise ParameterError(f"{key} must be {either}, got {value!r}")
+    return value
+
+
 class TireLearningEnv(gym.Env):
     """Base of the tire-learning envs: the parts their constructors and infos share.
 
@@ -178,9 +188,7 @@ class TireLearningEnv(gym.Env):
     def _init_task(self, args: Mapping[str, Any], lane_width: float) -> None:
         """Action mode, steering-offset bound, departure threshold (default: a wheel on the
         marking of a ``lane_width`` [m] lane) and initial-state noise."""
-        if args["action_mode"] not in ("offset", "full"):
-            raise ParameterError(f"action_mode must be 'offset' or 'full', got {args['action_mode']!r}")
-        self.action_mode = args["action_mode"]
+        self.action_mode = choice(args, "action_mode", ("offset", "full"))
         self.max_steering_offset = float(args["max_steering_offset"])
         if not self.max_steering_offset > 0:
             raise ParameterError("max_steering_offset must be > 0 [rad]")

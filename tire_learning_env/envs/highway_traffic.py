@@ -41,7 +41,7 @@ from ..driver import LaneKeepingDriver
 from ..params import ParameterError, VehicleParams, check_keys
 from ..sensors import Camera
 from ..simulation import Plant, advance_ticks_python, log_from_rows
-from ._base import COMMON_CONFIG_KEYS, TireLearningEnv, whole_rate_ratio
+from ._base import COMMON_CONFIG_KEYS, TireLearningEnv, choice, whole_rate_ratio
 from .highway_decisions import LANE_ID_MINUS_1, LANE_ID_PLUS_1, LANE_KEEP, EgoDecisions
 from .highway_ego import TruthEgoVehicle
 from .highway_lanes import SWITCH_JOIN, SWITCH_LANE_CHANGE, LaneReference, wrap_angle
@@ -135,12 +135,8 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
         )
         self.dt = 1.0 / self.physics_rate
 
-        if args["lane_change"] not in ("rule", "action", "off"):
-            raise ParameterError(f"lane_change must be 'rule', 'action' or 'off', got {args['lane_change']!r}")
-        self.lane_change = args["lane_change"]
-        if args["longitudinal"] not in ("idm", "constant"):
-            raise ParameterError(f"longitudinal must be 'idm' or 'constant', got {args['longitudinal']!r}")
-        self.longitudinal = args["longitudinal"]
+        self.lane_change = choice(args, "lane_change", ("rule", "action", "off"))
+        self.longitudinal = choice(args, "longitudinal", ("idm", "constant"))
         self.lane_change_time = float(args["lane_change_time"])
         if not self.lane_change_time > 0:
             raise ParameterError("lane_change_time must be > 0 [s]")
