@@ -4,7 +4,7 @@ r"""The ``"block"`` causal adaptation law of :class:`~.neuro_adaptive.NeuroAdapt
 block of ``block_s`` seconds while the Kalman predictor accumulates the block's
 prediction-error normal equations; at each block end one Gauss-Newton step of the fit over all
 blocks so far moves the weights (the offline fit's box-projected Newton step,
-:func:`.offline._solve_step`), the predictor's process noise is made consistent (NIS), and the
+:func:`.box_step._solve_step`), the predictor's process noise is made consistent (NIS), and the
 causal stiffness verdict's data for that instant are recorded (:meth:`BlockLaw.causal_stiffness`).
 Only rows before a block's end reach its step: the law is causal.
 """
@@ -17,6 +17,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _kernel as K
+from .box_step import _solve_step  # the box-projected Newton step of the offline fit
+from .readout import stiffness_gradient
 from .rows import _KernelRows, sensor_rows
 from .trace import EstimateTrace
 
@@ -45,8 +47,6 @@ class BlockLaw:
 
     def _close_block(self) -> None:
         """End of a block: one Gauss-Newton step of the fit over all blocks so far."""
-        from .offline import _solve_step  # the box-projected Newton step of the offline fit
-
         b = self._block
         acc = b["acc"]
         b["blocks"] += 1
@@ -86,8 +86,6 @@ class BlockLaw:
         the block law holds from then on (slope at zero, :func:`.readout.stiffness_gradient`: the
         whole-log read-out needs the slip of the whole log) and its standard deviation from the fit's
         weight covariance over all blocks so far (the data of rows before ``t_end`` only)."""
-        from .readout import stiffness_gradient  # readout imports this module
-
         b = self._block
         if "g_stiffness" not in b:
             b["g_stiffness"] = np.vstack([stiffness_gradient(self, i) for i in (0, 1)])

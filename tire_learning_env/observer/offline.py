@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from .box_step import _solve_step  # noqa: F401  (re-exported: prior_length and tests use it here)
 from .longrun import NW_KEPT_LAGS, _newey_west_columns, newey_west_variance, nw_columns_per_fft  # noqa: F401  (re-exported)
 from .neuro_adaptive import NeuroAdaptiveObserver, axle_index
 from .passes import _nis_per_dof, _pass, innovation_whiteness, pass_pieces, pass_threads  # noqa: F401  (re-exported)
@@ -137,23 +138,6 @@ class OfflineFit:
         Ainv_g = np.linalg.solve(self.hessian, g.T)
         model = np.einsum("ij,ij->j", g.T, Ainv_g)
         return self.variance(g) / np.maximum(model, 1e-300)
-
-
-def _solve_step(A: NDArray, rhs: NDArray, w: NDArray, lo: NDArray, hi: NDArray) -> NDArray:
-    """Box-projected Newton step: solve ``A dw = rhs`` with variables at an active bound fixed."""
-    free = np.ones(len(w), dtype=bool)
-    dw = np.zeros_like(w)
-    for _ in range(len(w)):
-        dw[:] = 0.0
-        idx = np.flatnonzero(free)
-        dw[idx] = np.linalg.solve(A[np.ix_(idx, idx)], rhs[idx] - A[np.ix_(idx, ~free)] @ dw[~free])
-        new = w + dw
-        hit = free & (((new < lo) & (dw < 0)) | ((new > hi) & (dw > 0)))
-        if not hit.any():
-            break
-        free &= ~hit
-        dw[~free] = np.clip(w[~free] + dw[~free], lo[~free], hi[~free]) - w[~free]
-    return np.clip(w + dw, lo, hi) - w
 
 
 def calibrate_force_error(observer: NeuroAdaptiveObserver, sensors: dict, w: NDArray, fit_from: float, gate: float,

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from .neuro_adaptive import NeuroAdaptiveObserver
-from .offline import OfflineFit, _final_fit, _gauss_newton, _solve_step
+from .box_step import _solve_step
+from .offline import OfflineFit, _final_fit, _gauss_newton
 
 __all__ = ["select_prior_length"]
 

@@ -5,11 +5,13 @@ the per-tire cornering stiffness ``C_nominal + g^T w`` as functionals ``g`` of t
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .neuro_adaptive import NeuroAdaptiveObserver
+if TYPE_CHECKING:  # annotations only: the observer's block law reads the stiffness through this module
+    from .neuro_adaptive import NeuroAdaptiveObserver
 
 __all__ = ["stiffness_gradient", "curve_gradient", "stiffness_readout", "weights_at_bound"]
 
