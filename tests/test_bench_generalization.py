@@ -187,3 +187,30 @@ def test_a_truth_that_blows_up_is_redrawn_with_the_reason_kept(bg):
     assert "error" not in out and built is not None and summary["valid"]
     assert kept["attempt"] == 1 and len(rejected) == 1
     assert rejected[0]["truth_summary"]["valid"] is False and "blew up" in rejected[0]["truth_summary"]["blew_up"]
+
+
+# -- issue 15: highway-env traffic -------------------------------------------------------------
+def test_highway_traffic_scenarios_are_seeded_and_in_range(bg):
+    a = [bg.sample_scenario("highway_traffic", i, 15, False) for i in range(8)]
+    assert a == [bg.sample_scenario("highway_traffic", i, 15, False) for i in range(8)]
+    assert {s["scene"]["kind"] for s in a} == {"highway", "racetrack"}
+    for s in a:
+        cam = s["camera"]
+        assert 10.0 <= cam["rate"] <= 100.0 and 0.0 <= cam["latency"] <= 0.1 and 0.0 <= cam["dropout_probability"] <= 0.2
+        assert all(0.8 <= f <= 1.2 for f in s["truth"]["stiffness_factor"]) and 30.0 <= s["duration_s"] <= 45.0
+    # appended to the families: the other families' seed keys (their index) are unchanged
+    assert bg.ALL_FAMILIES[: len(FAMILIES)] == FAMILIES and bg.ALL_FAMILIES[-1] == "highway_traffic"
+
+
+def test_quick_highway_traffic_family(tmp_path):
+    """One quick highway-env scenario: simulated, both estimators scored, the lane changes' e1 steps found."""
+    printed, written, _ = _run(tmp_path, "--quick", "--n", "1", "--workers", "1", "--families", "highway_traffic",
+                               timeout=300)  # fmt: skip
+    assert printed == written and set(written["families"]) == {"highway_traffic"}
+    rec = written["families"]["highway_traffic"]["scenarios"][0]
+    assert "error" not in rec and "error" not in rec["observer"] and "error" not in rec["ukf"]
+    drive = rec["truth_summary"]["drive"]
+    assert rec["scenario"]["scene"]["kind"] == "highway" and drive["lane_changes"] >= 1
+    assert rec["observer"]["e1_reexpressions"]["detected"] == drive["lane_changes"]
+    assert all(abs(e) < 10.0 for e in rec["observer"]["stiffness_error_pct"])  # loose: a 12 s drive
+    assert "highway_traffic" in written["target_check"]

@@ -201,6 +201,9 @@ def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:
         sensors = dict(sensors, ay=accelerometer_at_cg(sensors["t"], sensors["ay"], sensors["yaw_rate"], imu_x))
         log.notes.append(f"ay: accelerometer {imu_x:+g} m ahead of the CG (vehicle file imu_x): ay - imu_x * r_dot used")
     result = estimate(sensors, vehicle, None, config=config)
+    steps = result.calibration.get("e1_reexpressions") or {}
+    if steps.get("detected"):  # lane changes (or lane-line hand-overs) re-expressed e1: say what was done
+        log.notes.append("e1: " + steps["note"] + " (metrics.json: calibration.e1_reexpressions)")
     baseline = None
     if getattr(config, "sensors", "camera") == "both":  # the IMU path's linear KF beside the fused estimate
         from ..imu.fused import fused_linear_kf

@@ -8,6 +8,7 @@
 - :mod:`.neuro_adaptive`: :class:`NeuroAdaptiveObserver` (``reset``/``predict``/``update``/``run``);
   :mod:`.settings`: its settings; :mod:`.rows`: sensor columns to the kernel's rows;
 - :mod:`.calibration`: noise measured from the log; :mod:`.latency`: the camera latency from the log;
+  :mod:`.reexpression`: steps of the camera's ``e1`` no motion explains (lane changes), found and removed;
 - :mod:`.offline`: prediction-error refinement over a whole log, bands, verdict; :mod:`.longrun`: the
   scores' long-run variance; :mod:`.prior_length`: the smooth-curve prior's length from the log's evidence;
   :mod:`.readout`: the curve and stiffness read-outs of the weights;

@@ -135,12 +135,22 @@ def _stored_imu(st, slot, zrow):
     zrow[CH_R] = st.hist_u[i, 5]
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def release_e1(st, release):
+    """Add ``release`` [m^2] to the variance of ``e1`` before a frame whose ``e1`` is re-expressed in
+    another lane line (:mod:`.reexpression`): the offset left by the removed step is learnt from the
+    frames, not taken for motion (``e1`` enters no other state's dynamics)."""
+    if release > 0.0:
+        st.sig[E1, E1] += release
+
+
 @njit(cache=True, error_model="numpy")
-def delayed_camera(st, zk, M, G, S, adapt, accumulate, acc, score, k, wk, zrow):
+def delayed_camera(st, zk, M, G, S, adapt, accumulate, acc, score, k, wk, zrow, release):
     """Correct with a frame that shows the instant ``t_now - latency`` (out-of-sequence update).
 
     Rewinds to the stored prior of the newest row at or before that instant, replays that
-    row's IMU correction, predicts to the instant, corrects there (learning as usual), and
+    row's IMU correction, predicts to the instant, adds ``release`` to the variance of ``e1``
+    there (a re-expressed frame, :func:`release_e1`), corrects there (learning as usual), and
     replays the rows since (IMU corrections without learning, predictions with the new
     weights), rewriting their stored priors. Returns what :func:`update` returns.
     """
@@ -160,6 +170,7 @@ def delayed_camera(st, zk, M, G, S, adapt, accumulate, acc, score, k, wk, zrow):
         update(GROUP_IMU, st, d, v, zrow, M, G, S, False, False, acc, score, k, wk)
     dtp = max(tau - st.hist_t[sj], 0.0)
     predict(st, dtp, d, dd, v, a, kap, kd, M, S, wk)
+    release_e1(st, release)
     res = update(GROUP_CAMERA, st, d + dd * dtp, v + a * dtp, zk, M, G, S, adapt, accumulate, acc, score, k, wk)
     if j == now:
         return res
@@ -251,8 +262,11 @@ def _next_frame(z, k):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)  # nogil: the offline fit runs pieces of a pass on threads (passes._pass)
-def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last):
+def run_rows(t, delta, vx, ax, kappa, z, release, M, G, S, st, acc, out, wk, predict_last):
     """Process all rows (module docstring); state, health and accumulators are updated in place.
+
+    ``release[k]`` [m^2] is added to the variance of ``e1`` at the instant the frame of row ``k``
+    shows, before its correction (:func:`release_e1`; zero on rows without a re-expression).
 
     With ``S.shift_frames`` (fixed mode, camera only, a latency, nothing recorded) every
     delayed frame is applied at the instant it shows while sweeping forward, which gives the
@@ -297,8 +311,10 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
         if not shift and S.use_cam and (zk[CH_E1] == zk[CH_E1] or zk[CH_E2] == zk[CH_E2]):
             adapt_now = causal and S.adapt and st.hs[HS_CODE] == HEALTH_OK and tk >= S.settle_until
             if delayed:
-                nis, dof, n0, n1 = delayed_camera(st, zk, M, G, S, adapt_now, accumulate, acc, out.score, k, wk, zrow)
+                nis, dof, n0, n1 = delayed_camera(st, zk, M, G, S, adapt_now, accumulate, acc, out.score, k, wk, zrow,
+                                                  release[k])  # fmt: skip
             else:
+                release_e1(st, release[k])
                 nis, dof, n0, n1 = update(GROUP_CAMERA, st, delta[k], vx[k], zk, M, G, S, adapt_now, accumulate, acc,
                                           out.score, k, wk)  # fmt: skip
             if dof > 0:
@@ -370,6 +386,7 @@ def run_rows(t, delta, vx, ax, kappa, z, M, G, S, st, acc, out, wk, predict_last
                     for c in range(N_CHANNELS):
                         zrow[c] = z[nf, c]
                     acc_f = t[nf] >= S.accumulate_from
+                    release_e1(st, release[nf])
                     nis, dof, n0, n1 = update(GROUP_CAMERA, st, delta[k] + dd * dtp, vx[k] + ax[k] * dtp, zrow, M, G, S, False,
                                               acc_f, acc, out.score, nf, wk)  # fmt: skip
                     if dof > 0:

@@ -80,6 +80,11 @@ class ObserverConfig(_Params):
         real car decides).
     nis_factor : float
         Health test margin (:class:`~.neuro_adaptive.HealthParams`).
+    lane_reexpressions : bool
+        Offline estimates (:func:`.estimator.estimate`) of camera logs: find the steps of ``e1``
+        no motion explains (a lane change re-expresses ``e1`` in the new lane) and remove them
+        before the estimate (:mod:`.reexpression`; ``calibration["e1_reexpressions"]``). A log
+        without such steps is untouched.
     identifiable_rel_2sigma : float
         Stiffness reported as identified when its two-sigma band is within this fraction.
     curve_rel_2sigma : float
@@ -118,6 +123,7 @@ class ObserverConfig(_Params):
     block_s: float = AdaptationParams.block_s
     sensor_offsets: bool = AdaptationParams.sensor_offsets
     nis_factor: float = HealthParams.nis_factor
+    lane_reexpressions: bool = True
     identifiable_rel_2sigma: float = 0.1
     curve_rel_2sigma: float = 0.1
     recentre_max: int = 2

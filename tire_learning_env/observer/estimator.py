@@ -14,6 +14,8 @@ True
 Steps of :func:`estimate` (each reported in :attr:`EstimationResult.calibration`):
 
 1. **Sensors**: the camera if the log has one, else the IMU (``config.sensors="both"`` fuses them).
+   With a camera, steps of ``e1`` that no motion explains (a lane change re-expresses ``e1`` in
+   the new lane) are removed first (:mod:`.reexpression`, ``calibration["e1_reexpressions"]``).
 2. **Noise** of every channel from the log (:mod:`.calibration`), unless given.
 3. **Gains**: certified for the measured noise, frame period and speed range (:mod:`.gains`).
 4. **Latency** of the camera: the prediction-error cost after one Gauss-Newton step is
@@ -47,10 +49,11 @@ from .calibration import NOISE_DEFAULT, NOISE_FLOOR, _noise, sample_period
 from .config import ObserverConfig
 from .gains import synthesize_gains
 from .latency import _estimate_latency, _profile_window  # noqa: F401  (_profile_window: re-exported)
-from .model import MeasurementModel, measurement_model
+from .model import MeasurementModel, StateIndex, measurement_model
 from .neuro_adaptive import HealthParams, NeuroAdaptiveObserver
 from .offline import hold_fit, refine
 from .prior_length import select_prior_length
+from .reexpression import lane_reexpressions, release_variance, shift_back
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
 from .sensitivity import prefetch_window_baseline, steering_hold_sensitivity, yaw_dynamics_check
 
@@ -383,6 +386,11 @@ def _estimate_once(
         raise ParameterError("time must be strictly increasing")
     rows = {"t": t, "delta": rows_k["delta"], "vx": rows_k["vx"], "ax": rows_k["ax"], "kappa": rows_k["kappa"]}
     rows.update(e1=rows_k["z"][:, 0], e2=rows_k["z"][:, 1], ay=rows_k["z"][:, 2], yaw_rate=rows_k["z"][:, 3])
+    reexpressed = None
+    if model.uses_camera and config.lane_reexpressions:  # a lane change steps e1 by a lane width: a shift, not motion
+        rows["e1"], reexpressed = lane_reexpressions(t, rows["e1"], rows["e2"], rows["vx"])
+        if reexpressed["steps"]:  # and the offset the removed step leaves is learnt, not taken for motion
+            rows["e1_release"] = release_variance(len(t), reexpressed)
     dt = float(np.median(np.diff(t))) if physics_dt is None else float(physics_dt)
     t0 = time.perf_counter()
     noise, noise_info = _noise(config, rows, model, camera)
@@ -412,6 +420,7 @@ def _estimate_once(
         "speed_range_mps": list(speed_range),
         "row_period_median_s": dt,
         "segments": segments,
+        **({"e1_reexpressions": reexpressed} if reexpressed is not None else {}),
         "vehicle": vehicle.to_dict(),
         "stiffness": "given (pinned below the linear region)" if config.stiffness_known else "learned (the vehicle "
         "file's Cf, Cr are only the starting point)",
@@ -521,4 +530,7 @@ def _estimate_once(
     else:
         obs.reset(weights=online_w)
     runtime["total"] = time.perf_counter() - t_all
+    if reexpressed is not None:  # the estimates back on the log's lane reference
+        for tr in (online, offline):
+            shift_back(tr, reexpressed, StateIndex.E1)
     return EstimationResult(model.name, online, offline, obs, obs.gains, fit, online_w, calibration, runtime, config)

@@ -356,7 +356,7 @@ class NeuroAdaptiveObserver(BlockLaw):
                     out_ab = K.Outputs(*(v[a:b] for v in out))
                     acc_ab = acc._replace(innov=acc.innov[a:b]) if acc.innov.shape[0] else acc
                 K.run_rows(t[a:b], rows["delta"][a:b], rows["vx"][a:b], rows["ax"][a:b], rows["kappa"][a:b],
-                           rows["z"][a:b], self._model_tuple, self._gain_tuple, S_ab, self._state, acc_ab, out_ab, wk,
+                           rows["z"][a:b], rows["e1_release"][a:b], self._model_tuple, self._gain_tuple, S_ab, self._state, acc_ab, out_ab, wk,
                            bool(predict_last) if b == n else False)  # nothing predicted across a pause
             self.t = float(rows["t"][-1]) + (self.dt if predict_last else 0.0)
         if not record:

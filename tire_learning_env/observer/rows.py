@@ -57,10 +57,13 @@ def fill_path_curvature(t: NDArray, kappa: NDArray) -> NDArray:
 
 
 def sensor_rows(sensors: Mapping[str, ArrayLike], model: MeasurementModel) -> dict[str, NDArray]:
-    """The kernel's row arrays from sensor columns: ``t, delta, vx, ax, kappa`` and ``z`` (n, 4).
+    """The kernel's row arrays from sensor columns: ``t, delta, vx, ax, kappa``, ``z`` (n, 4) and
+    ``e1_release`` (n,).
 
     ``kappa`` comes from ``kappa`` or ``psi_dot_des / vx``; its empty cells are interpolated in
-    time (:func:`fill_path_curvature`); channels the model does not read are NaN. Ground truth (``true_*``) is refused.
+    time (:func:`fill_path_curvature`); channels the model does not read are NaN. ``e1_release``
+    [m^2]: the variance added to ``e1`` before the frame of a row whose ``e1`` was re-expressed
+    (:mod:`.reexpression`; the column of that name, else zeros). Ground truth (``true_*``) is refused.
     """
     need = ["t", "delta", "vx"]
     if model.uses_camera:
@@ -85,4 +88,7 @@ def sensor_rows(sensors: Mapping[str, ArrayLike], model: MeasurementModel) -> di
         z[:, CH_E1], z[:, CH_E2] = get("e1"), get("e2")
     if model.uses_imu:
         z[:, CH_AY], z[:, CH_R] = get("ay"), get("yaw_rate")
-    return {"t": t, "delta": delta, "vx": vx, "ax": ax, "kappa": np.ascontiguousarray(kappa), "z": z}
+    release = get("e1_release") if model.uses_camera and "e1_release" in sensors else np.zeros(n)
+    if len(release) != n:
+        raise ParameterError("sensor columns must have equal lengths")
+    return {"t": t, "delta": delta, "vx": vx, "ax": ax, "kappa": np.ascontiguousarray(kappa), "z": z, "e1_release": release}
