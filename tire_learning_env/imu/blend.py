@@ -92,7 +92,9 @@ pass used the whole log and is close to the KF where the curve is not identified
 both; a causal pass still learning is not, and a mixture would carry its error.) When a block's
 verdict changes, the evidence recursion resumes from the KF. Measured on ``imu_white`` scenario 2:
 the causal blend 0.0315 deg -> 0.0168 (KF 0.0160; 22 of 23 blocks fall back, the last two do not: the
-block law's rear band narrows to +-15 % with the file 2.0 sigma off, its own curve 18 % high).
+block law's rear band narrows to +-15 % with the file 2.0 sigma off, its own curve 18 % high). The
+verdict's band is the larger of the weight covariance's and the batch-means sandwich's over the closed
+blocks (:mod:`..observer.block_law`; docs/real_car.md, "Causal sandwich").
 """
 
 from __future__ import annotations
