@@ -22,6 +22,7 @@ Run: ``python benchmarks/bench_estimate_runtime.py`` (``--log NAME`` for one log
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import resource
 import subprocess
@@ -78,11 +79,14 @@ def run_one(name: str) -> dict:
     sensors, truth, nominal = _make_log(name)
     passes: list = []
     orig = K.run_rows
+    # the settings argument by name: its position moves when the kernel gains an argument (f385b80 added
+    # ``release`` before it, and this benchmark read the weight box's gains as the settings)
+    settings_at = list(inspect.signature(orig.py_func).parameters).index("S")
 
     def timed(*a):  # every pass of the compiled loop, with its row count
         t0 = time.perf_counter()
         out = orig(*a)
-        passes.append((len(a[0]), int(a[8].mode), time.perf_counter() - t0))
+        passes.append((len(a[0]), int(a[settings_at].mode), time.perf_counter() - t0))
         return out
 
     # warm the compiled kernel (numba cache) on a short slice so that compilation is not timed

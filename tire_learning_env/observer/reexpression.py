@@ -66,10 +66,22 @@ HALF_WINDOW = 5
 
 
 def _median_rate_trend(q: NDArray, dt: NDArray, half: int) -> NDArray:
-    """Per pair ``i``: the median of ``q`` over the ``half`` pairs on either side (``i`` excluded), times ``dt[i]``."""
+    """Per pair ``i``: the median of ``q`` over the ``half`` pairs on either side (``i`` excluded), times ``dt[i]``.
+
+    Pairs with ``half`` neighbours on both sides are done at once (one median along the rows of a sliding
+    window, the same partition and mean of the middle pair as one at a time); the ``2 half`` pairs at
+    the ends, whose windows are cut short, one at a time (a 30 min, 100 Hz log: 0.6 s -> about 10 ms).
+    """
     n = len(q)
     trend = np.empty(n)
-    for i in range(n):
+    if n > 2 * half:
+        win = np.lib.stride_tricks.sliding_window_view(q, 2 * half + 1)  # row j is centred on pair j + half
+        neighbours = np.concatenate([win[:, :half], win[:, half + 1 :]], axis=1)
+        trend[half : n - half] = np.median(neighbours, axis=1) * dt[half : n - half]
+        ends = [*range(half), *range(n - half, n)]
+    else:
+        ends = range(n)
+    for i in ends:
         lo, hi = max(0, i - half), min(n, i + half + 1)
         nb = np.concatenate([q[lo:i], q[i + 1 : hi]])
         trend[i] = (np.median(nb) if len(nb) else 0.0) * dt[i]
