@@ -21,7 +21,12 @@ estimator's (a function of the drive and the noise, not of the truth's shape), a
 (``corrected_error_pct``, the parametric-bootstrap bias correction) would remove it. This needs the road and
 the driver, which the benchmark has and a user's log does not: it is a diagnosis, not yet a feature.
 
-Run: ``python benchmarks/bench_bias_bootstrap.py [--family low_order_pacejka] [--scenarios 0,3] [--replicates 3]``
+With ``--told --noise-scale 1e-4`` the replicates are noise-free and their estimator is given the drive's estimated
+noise and latency: what is left is the bias the fit makes on exact data at the noisy drive's weighting (a
+deterministic part, no Monte Carlo needed to study it).
+
+Run: ``python benchmarks/bench_bias_bootstrap.py [--family low_order_pacejka] [--scenarios 0,3] [--replicates 3]
+[--told] [--noise-scale S]``
 (each scenario: 1 + replicates estimates, about 20-50 s each on one core).
 """
 
@@ -37,7 +42,7 @@ import numpy as np  # noqa: E402
 import bench_generalization as bg  # noqa: E402
 
 
-def scenario(family: str, i: int, replicates: int) -> dict:
+def scenario(family: str, i: int, replicates: int, told: bool = False, noise_scale: float = 1.0) -> dict:
     from tire_learning_env.dynamics import BicyclePlant
     from tire_learning_env.observer import ObserverConfig, estimate
     from tire_learning_env.params import CameraParams
@@ -60,14 +65,18 @@ def scenario(family: str, i: int, replicates: int) -> dict:
     boot_vehicle = truth_vehicle.replace(Cf=float(k[0]), Cr=float(k[1]))
     plant = BicyclePlant(boot_vehicle, front, rear)
     k_boot_true = np.asarray(plant.true_cornering_stiffness())
-    camera = dict(sc["camera"], noise="gaussian", e1_noise=float(noise["e1_m"]), e2_noise=float(noise["e2_rad"]),
-                  latency=round(latency, 4))  # fmt: skip
+    camera = dict(sc["camera"], noise="gaussian", e1_noise=noise_scale * float(noise["e1_m"]),
+                  e2_noise=noise_scale * float(noise["e2_rad"]), latency=round(latency, 4))  # fmt: skip
+    # told: the replicates' estimator is given the noise and latency estimated on the drive (what the replicate's
+    # camera has, before noise_scale), so only the fit itself is tested
+    boot_config = ObserverConfig(sensors="camera", **(dict(camera_noise=(float(noise["e1_m"]), float(noise["e2_rad"])),
+                                                          latency=round(latency, 4)) if told else {}))  # fmt: skip
     road = bg._road(sc["road"], sc["speed"]["vx"])
     errors = []
     for rep in range(replicates):
         boot_log = simulate(road, sc["duration_s"], vehicle=boot_vehicle, camera=CameraParams(**camera), seed=1000 + rep,
                             plant=plant, speed_profile=bg._speed_profile(sc["speed"]))  # fmt: skip
-        kb = np.asarray(estimate(boot_log.sensors, nominal, config=ObserverConfig(sensors="camera")).cornering_stiffness())
+        kb = np.asarray(estimate(boot_log.sensors, nominal, config=boot_config).cornering_stiffness())
         errors.append(100.0 * (kb / k_boot_true - 1.0))
     errors = np.asarray(errors)
     bias = errors.mean(axis=0)
@@ -89,13 +98,20 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--family", default="low_order_pacejka")
     ap.add_argument("--scenarios", default="0,1,2,3,4", help="comma-separated scenario indices of the family")
     ap.add_argument("--replicates", type=int, default=3)
+    ap.add_argument("--told", action="store_true",
+                    help="the replicates' estimator is given the drive's estimated noise and latency")
+    ap.add_argument("--noise-scale", type=float, default=1.0,
+                    help="the replicates' camera noise as a multiple of the estimated (1e-4: noise-free, with --told "
+                         "the bias the fit makes on exact data at the noisy drive's weighting)")
     args = ap.parse_args(argv)
-    out = {str(i): scenario(args.family, i, args.replicates) for i in (int(x) for x in args.scenarios.split(","))}
+    out = {str(i): scenario(args.family, i, args.replicates, args.told, args.noise_scale)
+           for i in (int(x) for x in args.scenarios.split(","))}
     est = np.array([r["estimate_error_pct"] for r in out.values()]).ravel()
     boot = np.array([r["bootstrap_bias_pct"] for r in out.values()]).ravel()
     cor = np.array([r["corrected_error_pct"] for r in out.values()]).ravel()
     result = {
         "benchmark": "bias_bootstrap", "family": args.family, "seed": 15, "replicates": args.replicates,
+        "told_noise_and_latency": args.told, "noise_scale": args.noise_scale,
         "scenarios": out,
         "summary": {
             "median_abs_estimate_error_pct": float(np.median(np.abs(est))),
