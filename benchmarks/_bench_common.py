@@ -73,3 +73,21 @@ def emit(result: dict) -> None:
     """Print the result as JSON with the machine it ran on."""
     result["machine"] = {"python": sys.version.split()[0], "platform": platform.platform(), "cpu_count": os.cpu_count()}
     print(json.dumps(result, indent=2))
+
+
+def pacejka_truth(nominal, truth: dict) -> tuple:
+    """``(truth_vehicle, (front_tire, rear_tire))`` of a low-order Pacejka truth drawn by the generalisation
+    benchmark: the vehicle file ``nominal`` with its stiffness scaled by ``truth["stiffness_factor"]``, and per
+    axle a Magic Formula of shape ``C``, ``E`` and peak ``D = mu F_z`` (static axle load) whose slope at zero is
+    that stiffness (``B C D = 2 C_alpha``). Used by ``bench_generalization.build`` and the highway family."""
+    from tire_learning_env.tires import PacejkaTire
+
+    k_true = [nominal.Cf * truth["stiffness_factor"][0], nominal.Cr * truth["stiffness_factor"][1]]
+    truth_vehicle = nominal.replace(Cf=k_true[0], Cr=k_true[1])
+    loads = truth_vehicle.static_axle_loads
+    tires = []
+    for j in range(2):
+        D = truth["mu"][j] * loads[j]
+        C = truth["C"][j]
+        tires.append(PacejkaTire(B=2.0 * k_true[j] / (C * D), C=C, D=D, E=truth["E"][j]))
+    return truth_vehicle, tuple(tires)

@@ -149,20 +149,13 @@ def build_highway(sc: dict, vehicle_of):
     vehicle_of : callable
         ``(name, vx) -> VehicleParams``: the benchmark's vehicle files.
     """
+    from _bench_common import pacejka_truth
     from tire_learning_env.dynamics import BicyclePlant
-    from tire_learning_env.tires import PacejkaTire
 
     nominal = vehicle_of(sc["vehicle"], sc["speed"]["vx"])  # the vehicle file
-    tr = sc["truth"]
-    k_true = [nominal.Cf * tr["stiffness_factor"][0], nominal.Cr * tr["stiffness_factor"][1]]
-    truth_vehicle = nominal.replace(Cf=k_true[0], Cr=k_true[1])
-    loads = truth_vehicle.static_axle_loads
-    tires = []
-    for j in range(2):
-        D = tr["mu"][j] * loads[j]
-        tires.append(PacejkaTire(B=2.0 * k_true[j] / (tr["C"][j] * D), C=tr["C"][j], D=D, E=tr["E"][j]))
+    truth_vehicle, tires = pacejka_truth(nominal, sc["truth"])
     plant = BicyclePlant(truth_vehicle, *tires)  # the env builds the same plant from the same tires
-    sensors, truth, events = drive(sc, truth_vehicle, tuple(tires))
+    sensors, truth, events = drive(sc, truth_vehicle, tires)
     log = SimpleNamespace(sensors=sensors, truth=truth, events=events)
     return log, plant, truth_vehicle, nominal, plant.true_axle_curve, tuple(float(x) for x in plant.true_cornering_stiffness())
 

@@ -363,7 +363,6 @@ def build(sc: dict):
     from tire_learning_env.dynamics import BicyclePlant
     from tire_learning_env.params import CameraParams
     from tire_learning_env.simulation import simulate
-    from tire_learning_env.tires import PacejkaTire
 
     vx = sc["speed"]["vx"]
     base = _vehicle(sc["vehicle"], vx)
@@ -372,14 +371,7 @@ def build(sc: dict):
     tr = sc["truth"]
     if tr["plant"] == "low_order_pacejka":
         nominal = base  # the vehicle file
-        k_true = [nominal.Cf * tr["stiffness_factor"][0], nominal.Cr * tr["stiffness_factor"][1]]
-        truth_vehicle = nominal.replace(Cf=k_true[0], Cr=k_true[1])
-        loads = truth_vehicle.static_axle_loads
-        tires = []
-        for j in range(2):
-            D = tr["mu"][j] * loads[j]
-            C = tr["C"][j]
-            tires.append(PacejkaTire(B=2.0 * k_true[j] / (C * D), C=C, D=D, E=tr["E"][j]))
+        truth_vehicle, tires = _bench_common.pacejka_truth(nominal, tr)
         plant = BicyclePlant(truth_vehicle, *tires)
         true_curve = plant.true_axle_curve
         true_stiffness = plant.true_cornering_stiffness()
