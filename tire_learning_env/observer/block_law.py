@@ -17,6 +17,7 @@ and so every estimate of the pass are those of ``A^-1``.
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Mapping
 
 import numpy as np
@@ -56,13 +57,60 @@ class _BlockScores:
         self.grad[self.n], self.hess[self.n], self.w[self.n] = grad, hess, w
         self.n += 1
 
+    def snapshot(self) -> tuple[NDArray, NDArray, NDArray, int]:
+        """``(grad, hess, w, n)``: the arrays and the count of the blocks closed so far. The first ``n``
+        entries are never written again (:meth:`append` writes entry ``n`` or grows into new arrays), so
+        the snapshot stays valid while blocks are added (a verdict computed on a thread reads it)."""
+        return self.grad, self.hess, self.w, self.n
+
     def projected(self, D: NDArray, w: NDArray) -> NDArray:
         """``u[i, b] = D[:, i] . (grad_b + H_b (w_b - w))`` (d, n): the blocks' score sums at the
         weights ``w``, projected on the columns of ``D`` (nw, d)."""
-        n = self.n
-        # H_b (w_b - w) as one batched product (a reshaped (n nw, nw) @ D is 50x slower: a skinny BLAS call)
-        shift = np.matmul(self.hess[:n], (self.w[:n] - w)[:, :, None])[:, :, 0]
-        return ((self.grad[:n] + shift) @ D).T
+        return _projected(self.snapshot(), D, w)
+
+
+def _projected(scores: tuple, D: NDArray, w: NDArray) -> NDArray:
+    """:meth:`_BlockScores.projected` of a :meth:`_BlockScores.snapshot`."""
+    grad, hess, wb, n = scores
+    # H_b (w_b - w) as one batched product (a reshaped (n nw, nw) @ D is 50x slower: a skinny BLAS call)
+    shift = np.matmul(hess[:n], (wb[:n] - w)[:, :, None])[:, :, 0]
+    return ((grad[:n] + shift) @ D).T
+
+
+def _sandwich_parts_of(G: NDArray, A: NDArray, Lam: NDArray, scores: tuple,
+                       w: NDArray) -> tuple[NDArray, NDArray] | None:  # fmt: skip
+    """:meth:`BlockLaw._sandwich_parts` from its inputs: the normal matrix ``A``, the prior precision ``Lam``,
+    a :meth:`_BlockScores.snapshot` and the weights ``w``."""
+    if scores[3] == 0:
+        return None
+    A = 0.5 * (A + A.T)
+    try:
+        D = np.linalg.solve(A, G.T)  # (nw, d): A^-1 g_i
+    except np.linalg.LinAlgError:
+        return None
+    return np.einsum("ji,jk,ki->i", D, Lam, D), _projected(scores, D, w)
+
+
+def _sandwich_variance_of(G: NDArray, A: NDArray, Lam: NDArray, scores: tuple, w: NDArray) -> NDArray | None:
+    """:meth:`BlockLaw._sandwich_variance` from its inputs (:func:`_sandwich_parts_of`)."""
+    parts = _sandwich_parts_of(G, A, Lam, scores, w)
+    if parts is None:
+        return None
+    prior, u = parts
+    return prior + np.sum(u**2, axis=1)
+
+
+def _verdict(t_end: float, c0: NDArray, G: NDArray, w: NDArray, pw: NDArray, A: NDArray, Lam: NDArray,
+             scores: tuple) -> tuple:  # fmt: skip
+    """:meth:`BlockLaw._causal_stiffness` from a snapshot of its inputs (:meth:`BlockLaw._verdict_inputs`):
+    a pure function, so that a long causal pass computes it on a thread (:meth:`BlockLaw._run_blocks`)."""
+    k = c0 + G @ w
+    var = np.einsum("ij,jk,ik->i", G, pw, G)
+    sand = _sandwich_variance_of(G, A, Lam, scores, w)
+    if sand is not None:
+        var = np.maximum(var, sand)
+    s = np.sqrt(np.maximum(var, 0.0))
+    return float(t_end), (float(k[0]), float(k[1])), (float(s[0]), float(s[1]))
 
 
 class BlockLaw:
@@ -118,7 +166,9 @@ class BlockLaw:
                 self._adapt_force_error(min(self.force_error * 2.0, hi_fe))
             elif nis < 1.0:
                 self._adapt_force_error(max(self.force_error / 1.5, lo_fe))
-        b["verdicts"].append(self._causal_stiffness(b["t_end"]))
+        inputs = self._verdict_inputs(b["t_end"])  # the verdict: on the pass' thread if it has one (_run_blocks)
+        pool = b.get("verdict_pool")
+        b["verdicts"].append(pool.submit(_verdict, *inputs) if pool is not None else _verdict(*inputs))
         b["w_run"] = self._state.w.copy()
         b["acc"] = K.Accumulator(np.zeros_like(acc.hess), np.zeros_like(acc.grad), np.zeros(4), np.empty((0, 2)))
         b["healthy"] = True
@@ -130,17 +180,17 @@ class BlockLaw:
         whole-log read-out needs the slip of the whole log) and its standard deviation over all blocks
         so far (the data of rows before ``t_end`` only): the larger of the model's (the weight
         covariance ``A^-1``) and the batch-means sandwich's (:meth:`_sandwich_variance`)."""
+        return _verdict(*self._verdict_inputs(t_end))
+
+    def _verdict_inputs(self, t_end: float) -> tuple:
+        """What :meth:`_causal_stiffness` reads, as of now (:func:`_verdict`'s arguments): the weights and
+        their covariance copied (the next block writes them in place); the normal matrix, the prior
+        precision and the scores' snapshot by reference (replaced, never written, by later blocks)."""
         b = self._block
         if "g_stiffness" not in b:
             b["g_stiffness"] = np.vstack([stiffness_gradient(self, i) for i in (0, 1)])
-        G = b["g_stiffness"]
-        k = np.array([self.vehicle.Cf, self.vehicle.Cr]) + G @ self._state.w
-        var = np.einsum("ij,jk,ik->i", G, self._state.pw, G)
-        sand = self._sandwich_variance(G)
-        if sand is not None:
-            var = np.maximum(var, sand)
-        s = np.sqrt(np.maximum(var, 0.0))
-        return float(t_end), (float(k[0]), float(k[1])), (float(s[0]), float(s[1]))
+        return (float(t_end), np.array([self.vehicle.Cf, self.vehicle.Cr]), b["g_stiffness"], self._state.w.copy(),
+                self._state.pw.copy(), b["A"], b["Lam"], b["scores"].snapshot())  # fmt: skip
 
     def _sandwich_parts(self, G: NDArray) -> tuple[NDArray, NDArray] | None:
         """The two shares of the batch-means sandwich along the rows of ``G`` (d, nw): the prior's,
@@ -149,15 +199,7 @@ class BlockLaw:
         current weights ``w`` (``w_b`` the weights the block was run with). ``None`` before a block
         entered the fit or when ``A`` is singular."""
         b = self._block
-        sc = b["scores"]
-        if sc.n == 0:
-            return None
-        A = 0.5 * (b["A"] + b["A"].T)
-        try:
-            D = np.linalg.solve(A, G.T)  # (nw, d): A^-1 g_i
-        except np.linalg.LinAlgError:
-            return None
-        return np.einsum("ji,jk,ki->i", D, b["Lam"], D), sc.projected(D, self._state.w)
+        return _sandwich_parts_of(G, b["A"], b["Lam"], b["scores"].snapshot(), self._state.w)
 
     def _sandwich_variance(self, G: NDArray) -> NDArray | None:
         """The batch-means sandwich variance ``g A^-1 (Lam + sum_b s_b s_b^T) A^-1 g`` of the stiffness
@@ -171,11 +213,8 @@ class BlockLaw:
         score (batch means; the offline fit's Newey-West sandwich, :mod:`.longrun`, for a causal
         law). Only closed blocks enter: the variance at a block's end uses rows before it only.
         """
-        parts = self._sandwich_parts(G)
-        if parts is None:
-            return None
-        prior, u = parts
-        return prior + np.sum(u**2, axis=1)
+        b = self._block
+        return _sandwich_variance_of(G, b["A"], b["Lam"], b["scores"].snapshot(), self._state.w)
 
     def causal_stiffness(self) -> dict:
         """The block law's causal stiffness verdict data, one entry per closed block
@@ -203,30 +242,44 @@ class BlockLaw:
             b["t_end"] = fit_from + self.adaptation.block_s
         pieces: list[EstimateTrace] = []
         held: list[NDArray] = []  # the weights each piece held (a piece's rows all carry them)
-        k = 0
-        while k < n:
-            while t[k] >= b["t_end"]:
-                self._close_block()
-            j = max(int(np.searchsorted(t, b["t_end"], side="left")), k + 1)
-            last = j >= n
-            piece = _KernelRows({c: v[k:j] for c, v in rows.items()})  # validated once, above
-            held.append(self._state.w.copy())
-            tr = self.run(piece, predict_last=predict_last if last else False, mode="fixed", accumulator=b["acc"],
-                          accumulate_from=fit_from, gate=25.0, compute_std=compute_std, store_weights=False,
-                          kalman=True)  # fmt: skip
-            h = tr.health
-            if np.any((h == K.HEALTH_NO_DATA) | (h == K.HEALTH_INCONSISTENT) | (h == K.HEALTH_DIVERGED)):
-                b["healthy"] = False  # adaptation frozen while the health flag is tripped
-            pieces.append(tr)
-            if not last and float(t[j] - t[j - 1]) <= self.segment_gap_s:  # to the next row, as run() would
-                # have predicted inside one call (across a pause nothing: run() restarts the state there)
-                dt_j = float(t[j] - t[j - 1])
-                d0, d1 = float(rows["delta"][j - 1]), float(rows["delta"][j])
-                ramp = (d1 - d0) / dt_j if (self.steering_hold == "ramp" and dt_j > 0 and np.isfinite(d1)) else 0.0
-                self.predict(dt_j, d0, float(rows["vx"][j - 1]), float(rows["kappa"][j - 1]), float(rows["ax"][j - 1]),
-                             float(self._state.hs[K.HS_KAPPA_RATE]), ramp)  # fmt: skip
-                self.t = float(t[j])
-            k = j
+        # a long call's verdicts on a thread: the batch-means sandwich grows with the blocks closed (0.2 s of a
+        # 30 min log's causal pass, which runs on one core); beside the compiled loop, which releases the GIL,
+        # the other core computes them (the same functions of the same inputs, bit for bit). Short calls (an
+        # env's steps) compute them in line: a thread per call would cost more than it saves
+        long_call = n > 0 and float(t[-1]) - b["t_end"] >= 4.0 * self.adaptation.block_s
+        pool = ThreadPoolExecutor(max_workers=1) if long_call else None
+        if pool is not None:
+            b["verdict_pool"] = pool
+        try:
+            k = 0
+            while k < n:
+                while t[k] >= b["t_end"]:
+                    self._close_block()
+                j = max(int(np.searchsorted(t, b["t_end"], side="left")), k + 1)
+                last = j >= n
+                piece = _KernelRows({c: v[k:j] for c, v in rows.items()})  # validated once, above
+                held.append(self._state.w.copy())
+                tr = self.run(piece, predict_last=predict_last if last else False, mode="fixed", accumulator=b["acc"],
+                              accumulate_from=fit_from, gate=25.0, compute_std=compute_std, store_weights=False,
+                              kalman=True)  # fmt: skip
+                h = tr.health
+                if np.any((h == K.HEALTH_NO_DATA) | (h == K.HEALTH_INCONSISTENT) | (h == K.HEALTH_DIVERGED)):
+                    b["healthy"] = False  # adaptation frozen while the health flag is tripped
+                pieces.append(tr)
+                if not last and float(t[j] - t[j - 1]) <= self.segment_gap_s:  # to the next row, as run() would
+                    # have predicted inside one call (across a pause nothing: run() restarts the state there)
+                    dt_j = float(t[j] - t[j - 1])
+                    d0, d1 = float(rows["delta"][j - 1]), float(rows["delta"][j])
+                    ramp = (d1 - d0) / dt_j if (self.steering_hold == "ramp" and dt_j > 0 and np.isfinite(d1)) else 0.0
+                    self.predict(dt_j, d0, float(rows["vx"][j - 1]), float(rows["kappa"][j - 1]), float(rows["ax"][j - 1]),
+                                 float(self._state.hs[K.HS_KAPPA_RATE]), ramp)  # fmt: skip
+                    self.t = float(t[j])
+                k = j
+        finally:
+            if pool is not None:
+                del b["verdict_pool"]
+                pool.shutdown(wait=True)
+                b["verdicts"] = [v.result() if isinstance(v, Future) else v for v in b["verdicts"]]
         if not pieces:
             return self.run(sensors, predict_last, mode="fixed", compute_std=compute_std, store_weights=store_weights)
         # the per-row weights from the weights each piece held, written once (the pieces do not store them:

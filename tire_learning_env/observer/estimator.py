@@ -55,7 +55,7 @@ from .offline import hold_fit, refine
 from .prior_length import select_prior_length
 from .reexpression import lane_reexpressions, release_variance, shift_back
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
-from .sensitivity import prefetch_window_baseline, steering_hold_sensitivity, yaw_dynamics_check
+from .sensitivity import prefetch_window_refits, steering_hold_sensitivity, yaw_dynamics_check
 
 # names this module imported before its split (still importable from here)
 from ..params import _Params  # noqa: F401
@@ -456,13 +456,19 @@ def _estimate_once(
             fit = _lower_posterior_cost(obs, rows, fit, refine(obs, rows, np.zeros_like(online_w),
                                                                prior_cov=obs.prior_covariance(offline=True)))
             calibration["offline_start"] = fit.start
+        # a camera log whose rows lie between its frames: the midpoint of the two holds (a simulator's rows at its
+        # step hold the steering; rows decimated from a faster drive ramp); rows that are the frames themselves
+        # come from a drive faster than its frames, so the ramp is kept (sensitivity.steering_hold_sensitivity)
+        midpoint = (model.name == "camera" and config.steering_hold is None
+                    and float(np.mean(np.isfinite(rows["e1"]))) < 0.6)  # frames on fewer than 60 % of the rows
         if again:  # the latency again, from the refined curve
             first = obs.latency
 
             def profile_again():
                 """The second latency profile and its decision; without a refit, the sensitivity checks' window
-                refit from the weights (prefetch_window_baseline). On a thread while this one makes the fit's
-                final recorded pass (offline.PendingFit: the same fit, bit for bit)."""
+                refit from the weights and their alternatives' refits from it (prefetch_window_refits). On a
+                thread while this one makes the fit's final recorded pass (offline.PendingFit: the same fit, bit
+                for bit)."""
                 obs.set_force_error(fit.force_error)
                 lat2, lat2_info = _estimate_latency(obs, rows, config, weights=fit.weights, around=first)
                 prof = lat2_info["profile_s_to_cost_per_update"]
@@ -473,7 +479,7 @@ def _estimate_once(
                 if not refit:
                     obs.latency = first
                     if model.name == "camera":
-                        prefetch_window_baseline(obs, rows, fit)
+                        prefetch_window_refits(obs, rows, fit, midpoint=midpoint)
                 return lat2, lat2_info, gain, refit
 
             with ThreadPoolExecutor(max_workers=1) as pool:
@@ -499,12 +505,8 @@ def _estimate_once(
         # the prior's length: kept (1 deg unless given), its plausible neighbours' answers in the bands
         fit, calibration["prior_length"] = select_prior_length(obs, rows, fit, choose=False)
         # the other steering hold: how much the answer leans on what the steering did between rows (with
-        # an IMU the a_y innovations show the steering's timing and the fit decides between the holds)
-        # a camera log whose rows lie between its frames: the midpoint of the two holds (a simulator's rows at its
-        # step hold the steering; rows decimated from a faster drive ramp); rows that are the frames themselves
-        # come from a drive faster than its frames, so the ramp is kept (sensitivity.steering_hold_sensitivity)
-        midpoint = (model.name == "camera" and config.steering_hold is None
-                    and float(np.mean(np.isfinite(rows["e1"]))) < 0.6)  # frames on fewer than 60 % of the rows
+        # an IMU the a_y innovations show the steering's timing and the fit decides between the holds; ``midpoint``
+        # above)
         hold_info = steering_hold_sensitivity(obs, rows, fit, decide_by_cost=model.uses_imu, midpoint=midpoint)
         if hold_info.get("switch"):
             obs.steering_hold = hold_info["other"]

@@ -32,6 +32,7 @@ The *learned slip range* of each axle is where the curve's two-sigma band is wit
 from __future__ import annotations
 
 import copy
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -147,11 +148,25 @@ def calibrate_force_error(observer: NeuroAdaptiveObserver, sensors: dict, w: NDA
     ``log NIS`` against ``log force error`` (a method-of-moments noise identification)."""
     lo, hi = bounds
     grid = np.geomspace(lo, hi, 4)
-    nis = []
-    for fe in grid:
-        observer.set_force_error(fe)
-        acc, _ = _pass(observer, sensors, w, fit_from, gate)
-        nis.append(_nis_per_dof(acc))
+    t = np.asarray(sensors["t"], dtype=float)
+    if len(pass_pieces(t, observer.settle_s)) == 1 and pass_threads() > 1:
+        # the grid's passes are independent: on threads, each on its own copy of the observer (its own state
+        # and process noise; the compiled loop releases the GIL), as the latency profile runs its candidates.
+        # A log this short makes each pass one piece on one core (the latency profile's 120 s window: 4 passes
+        # in series took 0.23 s of a 30 min log's estimate with the other core idle); the same passes, bit for bit
+        def nis_at(fe):
+            ob = copy.copy(observer)
+            ob.set_force_error(fe)
+            return _nis_per_dof(_pass(ob, sensors, w, fit_from, gate)[0])
+
+        with ThreadPoolExecutor(max_workers=min(pass_threads(), len(grid))) as pool:
+            nis = list(pool.map(nis_at, grid))
+    else:  # a long log's passes run as pieces on threads already
+        nis = []
+        for fe in grid:
+            observer.set_force_error(fe)
+            acc, _ = _pass(observer, sensors, w, fit_from, gate)
+            nis.append(_nis_per_dof(acc))
     nis = np.array(nis)
     ln_fe, ln_n = np.log(grid), np.log(np.maximum(nis, 1e-12))
     if nis[-1] > 1.0:  # still inconsistent at the largest: the model error is larger than the range
@@ -426,7 +441,8 @@ class PendingFit:
     Why: the final pass records the trace, so it runs as one piece on one core; on a 2-core
     machine the other core is idle for its duration (2-4 s on a 30 min, 100 Hz log) unless the
     caller has work that needs only the weights (:func:`.estimator.estimate` profiles the latency
-    again and refits the sensitivity checks' window meanwhile, on a thread; the final pass itself
+    again, refits the sensitivity checks' window and their alternatives from it meanwhile, on a thread
+    (:func:`.sensitivity.prefetch_window_refits`); the final pass itself
     runs on the caller's thread, so its large per-row arrays come from the same allocator arena
     as before: on a worker thread the peak memory of a 30 min, 100 Hz estimate rose from
     499-501 MB to 513-540 MB).

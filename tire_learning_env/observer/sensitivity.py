@@ -22,19 +22,29 @@ import numpy as np
 from .neuro_adaptive import NeuroAdaptiveObserver
 from .offline import OfflineFit, _continuation_rows, _gauss_newton, hold_fit
 
-__all__ = ["steering_hold_sensitivity", "yaw_dynamics_check", "prefetch_window_baseline"]
+__all__ = ["steering_hold_sensitivity", "yaw_dynamics_check", "prefetch_window_baseline", "prefetch_window_refits"]
 
 #: The window and the refit of :func:`steering_hold_sensitivity` and :func:`yaw_dynamics_check` (their defaults):
 #: ``(window_s, gate, max_iter, tol, min_decrease)``.
 WINDOW_REFIT = (300.0, 25.0, 2, 1e-3, 1e-2)
 
 
+#: The yaw inertia factor :func:`yaw_dynamics_check` refits with first (and its inverse).
+YAW_FACTOR = 0.85
+
+
+def _baseline_key(observer: NeuroAdaptiveObserver, window_s: float, gate: float, max_iter: int, tol: float,
+                  min_decrease: float) -> tuple:  # fmt: skip
+    """The window baseline's cache key: the window and refit settings and the observer's own assumptions."""
+    return (float(window_s), observer.steering_hold, float(observer.vehicle.Iz), float(gate), int(max_iter), float(tol),
+            float(min_decrease))  # fmt: skip
+
+
 def _window_baseline(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, window_s: float, gate: float,
                      max_iter: int, tol: float, min_decrease: float) -> tuple[dict, float, np.ndarray, float]:  # fmt: skip
     """The log's most active ``window_s`` (the whole log if shorter) and the fit refitted on it under the
     observer's own assumptions: the baseline every alternative is compared with (computed once per fit)."""
-    key = (float(window_s), observer.steering_hold, float(observer.vehicle.Iz), float(gate), int(max_iter), float(tol),
-           float(min_decrease))  # fmt: skip
+    key = _baseline_key(observer, window_s, gate, max_iter, tol, min_decrease)
     cached = getattr(fit, "_window_baselines", None)
     if cached is None:
         cached = fit._window_baselines = {}
@@ -60,6 +70,71 @@ def prefetch_window_baseline(observer: NeuroAdaptiveObserver, sensors: dict, fit
     """
     window_s, gate, max_iter, tol, min_decrease = WINDOW_REFIT
     _window_baseline(observer, sensors, fit, window_s, gate, max_iter, tol, min_decrease)
+
+
+def _window_refit(observer: NeuroAdaptiveObserver, fit, base_key: tuple, rows: dict, fit_from: float,
+                  w_start: np.ndarray, n_iter: int, gate: float, tol: float,
+                  min_decrease: float) -> tuple[np.ndarray, list, int]:  # fmt: skip
+    """``(w, costs, iterations)`` of :func:`.offline._gauss_newton` on the window ``rows`` from the baseline's
+    weights ``w_start`` under the observer's current assumptions (an alternative's refit), cached on the fit
+    beside its baseline (``base_key``), so that :func:`prefetch_window_refits` can compute it ahead.
+
+    The key holds every assumption the refit reads that may change between the checks (steering hold, yaw
+    inertia, process noise, latency) and the refit's settings; the weight box and the prior precision are the
+    fit's own."""
+    key = ("refit", base_key, observer.steering_hold, float(observer.vehicle.Iz), float(observer.force_error),
+           float(observer.latency), int(n_iter), float(gate), float(tol), float(min_decrease))  # fmt: skip
+    cached = getattr(fit, "_window_baselines", None)
+    if cached is None:
+        cached = fit._window_baselines = {}
+    if key not in cached:
+        lo, hi = observer._weight_box()
+        w, _, costs, it = _gauss_newton(observer, rows, w_start, np.zeros_like(w_start), fit.prior_precision, lo, hi,
+                                        fit_from, gate, n_iter, tol, min_decrease)  # fmt: skip
+        cached[key] = (w, costs, it)
+    return cached[key]
+
+
+def _other_hold(hold: str) -> str:
+    """The steering hold :func:`steering_hold_sensitivity` refits under: the other one."""
+    return "hold" if hold == "ramp" else "ramp"
+
+
+def _row_period(sensors: dict) -> float:
+    """Median row spacing [s] (0 with fewer than two rows): :func:`steering_hold_sensitivity` skips fast logs."""
+    t = np.asarray(sensors["t"], dtype=float)
+    return float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+
+
+def prefetch_window_refits(observer: NeuroAdaptiveObserver, sensors: dict, fit, midpoint: bool = False) -> None:
+    """:func:`prefetch_window_baseline`, then the refits from it that :func:`yaw_dynamics_check` (its two
+    inertias, :data:`YAW_FACTOR` and its inverse) and :func:`steering_hold_sensitivity` (the other hold;
+    ``midpoint`` as the caller will pass it) make with their defaults, ahead of them.
+
+    Why: like the baseline, these refits need only the fit's weights and prior precision and the observer's
+    assumptions, so :func:`.estimator.estimate` computes them on the thread that runs beside the fit's final
+    recorded pass (one core): on a 30 min, 100 Hz log that core was idle for about 0.9 s after the second latency
+    profile and the baseline, and the checks then ran their refits after the final pass. The checks find them
+    in the cache (:func:`_window_refit`); the same refits, bit for bit. The observer's assumptions are restored.
+    """
+    window_s, gate, max_iter, tol, min_decrease = WINDOW_REFIT
+    rows, fit_from, w_same, _ = _window_baseline(observer, sensors, fit, window_s, gate, max_iter, tol, min_decrease)
+    base = _baseline_key(observer, window_s, gate, max_iter, tol, min_decrease)
+    vehicle, used = observer.vehicle, observer.steering_hold
+    try:
+        for f in (YAW_FACTOR, 1.0 / YAW_FACTOR):
+            observer.set_vehicle(vehicle.replace(Iz=vehicle.Iz * f))
+            _window_refit(observer, fit, base, rows, fit_from, w_same, max_iter, gate, tol, min_decrease)
+    finally:
+        observer.set_vehicle(vehicle)
+    if _row_period(sensors) < 0.002:  # steering_hold_sensitivity's min_row_period: it skips the refit
+        return
+    try:
+        observer.steering_hold = _other_hold(used)
+        n_alt = 2 * max_iter if midpoint else max_iter
+        _window_refit(observer, fit, base, rows, fit_from, w_same, n_alt, gate, tol, min_decrease)
+    finally:
+        observer.steering_hold = used
 
 
 def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, gate: float = 25.0,
@@ -101,24 +176,22 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
     ``alternative_iter`` Gauss-Newton steps (default ``2 * max_iter`` with ``midpoint``, else
     ``max_iter``) carry the other hold's refit from the window's baseline.
     """
-    t = np.asarray(sensors["t"], dtype=float)
-    period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    period = _row_period(sensors)
     used = observer.steering_hold
-    other = "hold" if used == "ramp" else "ramp"
+    other = _other_hold(used)
     if period < min_row_period:
         fit.hold_alternatives = []
         return {"other": other, "sensitivity": "skipped: rows closer than "
                 f"{1000 * min_row_period:g} ms, the holds differ by less than half of that"}  # fmt: skip
     lo, hi = observer._weight_box()
-    w0 = np.zeros_like(fit.weights)
     # a long log: its most active window, both holds refitted
     rows, fit_from, w_same, c_same = _window_baseline(observer, sensors, fit, window_s, gate, max_iter, tol, min_decrease)
+    base = _baseline_key(observer, window_s, gate, max_iter, tol, min_decrease)
     t_w = np.asarray(rows["t"], dtype=float)
     try:
         observer.steering_hold = other
         n_alt = int(alternative_iter) if alternative_iter is not None else (2 * max_iter if midpoint else max_iter)
-        w_alt, _, c_alt, it = _gauss_newton(observer, rows, w_same, w0, fit.prior_precision, lo, hi, fit_from, gate,
-                                            n_alt, tol, min_decrease)  # fmt: skip
+        w_alt, c_alt, it = _window_refit(observer, fit, base, rows, fit_from, w_same, n_alt, gate, tol, min_decrease)
     finally:
         observer.steering_hold = used
         hold_fit(observer, fit)
@@ -144,7 +217,7 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
     return info
 
 
-def yaw_dynamics_check(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, factor: float = 0.85,
+def yaw_dynamics_check(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, factor: float = YAW_FACTOR,
                        max_factor: float = 1.43, gate: float = 25.0, max_iter: int = 2, tol: float = 1e-3, min_decrease: float = 1e-2,
                        window_s: float = 300.0, decisive_chi2: float = 10.0) -> dict:  # fmt: skip
     """Does the log's transient response agree with the vehicle file's yaw dynamics?
@@ -176,17 +249,14 @@ def yaw_dynamics_check(observer: NeuroAdaptiveObserver, sensors: dict, fit: Offl
         a rejection means.
     """
     rows, fit_from, w_same, c_same = _window_baseline(observer, sensors, fit, window_s, gate, max_iter, tol, min_decrease)
+    base = _baseline_key(observer, window_s, gate, max_iter, tol, min_decrease)
     t_w = np.asarray(rows["t"], dtype=float)
-    lo, hi = observer._weight_box()
-    w0 = np.zeros_like(fit.weights)
-    Lam = fit.prior_precision
     vehicle = observer.vehicle
     decrease, changes = {}, []
 
     def refit(f: float, n_iter: int = max_iter) -> None:
         observer.set_vehicle(vehicle.replace(Iz=vehicle.Iz * f))
-        w_f, _, costs, _ = _gauss_newton(observer, rows, w_same, w0, Lam, lo, hi, fit_from, gate, n_iter, tol,
-                                         min_decrease)  # fmt: skip
+        w_f, costs, _ = _window_refit(observer, fit, base, rows, fit_from, w_same, n_iter, gate, tol, min_decrease)
         decrease[f"{f:.4g}"] = float(c_same - costs[-1])
         changes.append(w_f - w_same)
 
