@@ -48,7 +48,9 @@ class ObserverConfig(_Params):
         log cannot tell (the curve and the latency absorb a wrong hold: the prediction-error
         cost preferred ``hold`` on a log where it read the stiffness +1.8 / +2.6 % off and
         ``ramp`` +0.15 / +0.14 %), so the bands add how much the answer moves under the other
-        hold (:func:`.sensitivity.steering_hold_sensitivity`): negligible for rows at 1 kHz,
+        hold (:func:`.sensitivity.steering_hold_sensitivity`), and a camera log whose frames
+        are sparser than its rows reports the midpoint of the two: 0.1-0.5 % apart at 1 kHz
+        rows (two simulators that both hold the steering preferred opposite holds there),
         large when the rows are sparse (a closed-loop log at 20 Hz rows: +11 / +18 % held,
         +1.2 / +1.8 % ramped).
     stiffness_known : bool

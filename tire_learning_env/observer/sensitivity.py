@@ -106,10 +106,11 @@ def _row_period(sensors: dict) -> float:
     return float(np.median(np.diff(t))) if len(t) > 1 else 0.0
 
 
-def prefetch_window_refits(observer: NeuroAdaptiveObserver, sensors: dict, fit, midpoint: bool = False) -> None:
+def prefetch_window_refits(observer: NeuroAdaptiveObserver, sensors: dict, fit, midpoint: bool = False,
+                           min_row_period: float = 0.002) -> None:
     """:func:`prefetch_window_baseline`, then the refits from it that :func:`yaw_dynamics_check` (its two
     inertias, :data:`YAW_FACTOR` and its inverse) and :func:`steering_hold_sensitivity` (the other hold;
-    ``midpoint`` as the caller will pass it) make with their defaults, ahead of them.
+    ``midpoint`` and ``min_row_period`` as the caller will pass them) make with their defaults, ahead of them.
 
     Why: like the baseline, these refits need only the fit's weights and prior precision and the observer's
     assumptions, so :func:`.estimator.estimate` computes them on the thread that runs beside the fit's final
@@ -127,7 +128,7 @@ def prefetch_window_refits(observer: NeuroAdaptiveObserver, sensors: dict, fit, 
             _window_refit(observer, fit, base, rows, fit_from, w_same, max_iter, gate, tol, min_decrease)
     finally:
         observer.set_vehicle(vehicle)
-    if _row_period(sensors) < 0.002:  # steering_hold_sensitivity's min_row_period: it skips the refit
+    if _row_period(sensors) < min_row_period:  # steering_hold_sensitivity skips the refit there
         return
     try:
         observer.steering_hold = _other_hold(used)
@@ -151,7 +152,11 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
     tell (the learned curve and the latency absorb a wrong choice), so the answer's change
     under the other hold is reported as uncertainty: half of it is one standard deviation
     (the two holds bracket what the steering did). Rows closer than ``min_row_period`` [s]
-    (a 1 kHz log) are skipped: the two holds differ by less than half a millisecond there.
+    are skipped (the two holds differ by less than half a row there); :func:`.estimator.estimate`
+    passes 0 for camera logs, whose answer moves 0.1-0.5 % between the holds even at 1 kHz rows
+    (a package drive's steering steps at a frame's row in reaction to that frame's noise; an
+    independent generator's steering is smooth: the two preferred opposite holds), and keeps the
+    2 ms for IMU logs.
     A log longer than ``window_s`` [s] is refitted under both holds on its most active window
     (the change, a timing effect, is about the same on any stretch of the drive).
 
