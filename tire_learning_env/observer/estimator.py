@@ -55,7 +55,7 @@ from .offline import hold_fit, refine
 from .prior_length import select_prior_length
 from .reexpression import lane_reexpressions, release_variance, shift_back
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
-from .sensitivity import prefetch_window_refits, steering_hold_sensitivity, yaw_dynamics_check
+from .sensitivity import prefetch_window_refits, steering_delay_check, steering_hold_sensitivity, yaw_dynamics_check
 
 # names this module imported before its split (still importable from here)
 from ..params import _Params  # noqa: F401
@@ -530,6 +530,9 @@ def _estimate_once(
             t1 = time.perf_counter()
             calibration["yaw_dynamics"] = yaw_dynamics_check(obs, rows, fit)
             runtime["yaw_dynamics_check"] = time.perf_counter() - t1
+            t1 = time.perf_counter()  # and the timing of the steering's effect (tire relaxation, compliance)
+            calibration["steering_delay"] = steering_delay_check(obs, rows, fit)
+            runtime["steering_delay_check"] = time.perf_counter() - t1
         offline = fit.trace
         runtime["offline_refinement"] = time.perf_counter() - t0
         calibration["offline"] = {

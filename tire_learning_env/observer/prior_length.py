@@ -103,5 +103,6 @@ def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: Off
     new.prior_alternatives = getattr(fit, "prior_alternatives", [])
     new.hold_alternatives = getattr(fit, "hold_alternatives", [])
     new.dynamics_alternatives = getattr(fit, "dynamics_alternatives", [])
+    new.delay_alternatives = getattr(fit, "delay_alternatives", [])
     new.mismatch_alternatives = getattr(fit, "mismatch_alternatives", [])
     return new, info
