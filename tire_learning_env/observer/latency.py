@@ -67,10 +67,14 @@ def _estimate_latency(obs: NeuroAdaptiveObserver, rows: dict, config: ObserverCo
             keep(d, *profile(d))
         return costs[d]
 
-    grid = sorted({round(float(c), 4) for c in cands})
-    with ThreadPoolExecutor(max_workers=min(pass_threads(), len(grid))) as pool:
-        for d, (J, n) in zip(grid, pool.map(profile, grid)):
-            keep(d, J, n)
+    def profile_all(candidates):  # the candidates not yet profiled, on threads; kept in sorted order
+        todo = sorted({round(float(c), 4) for c in candidates} - set(costs))
+        if todo:
+            with ThreadPoolExecutor(max_workers=min(pass_threads(), len(todo))) as pool:
+                for d, (J, n) in zip(todo, pool.map(profile, todo)):
+                    keep(d, J, n)
+
+    profile_all(cands)
     ds = sorted(costs)
     j = int(np.argmin([costs[d] for d in ds]))
     best = ds[j]
@@ -89,11 +93,7 @@ def _estimate_latency(obs: NeuroAdaptiveObserver, rows: dict, config: ObserverCo
         # both are profiled whatever the first gives (each is compared with the best so far), so on threads as
         # the grid (in series they took 0.13 s of a 30 min log's estimate with the other core idle); the same
         # costs, compared in the same order
-        todo = sorted({round(float(x), 4) for x in near} - set(costs))
-        if todo:
-            with ThreadPoolExecutor(max_workers=min(pass_threads(), len(todo))) as pool:
-                for d, (J, n) in zip(todo, pool.map(profile, todo)):
-                    keep(d, J, n)
+        profile_all(near)
         for xv in near:
             if cost(xv) < costs[best]:
                 best = round(xv, 4)
