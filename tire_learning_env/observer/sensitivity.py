@@ -48,14 +48,26 @@ def _baseline_key(observer: NeuroAdaptiveObserver, window_s: float, gate: float,
             float(min_decrease))  # fmt: skip
 
 
+def _cache(fit) -> dict:
+    """The fit's cache of the window baseline and the alternatives' refits (created on first use)."""
+    cached = getattr(fit, "_window_baselines", None)
+    if cached is None:
+        cached = fit._window_baselines = {}
+    return cached
+
+
+def _assumptions(observer: NeuroAdaptiveObserver) -> tuple:
+    """What an alternative's refit reads that may change between the checks: steering hold, yaw inertia,
+    process noise, latency."""
+    return (observer.steering_hold, float(observer.vehicle.Iz), float(observer.force_error), float(observer.latency))
+
+
 def _window_baseline(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, window_s: float, gate: float,
                      max_iter: int, tol: float, min_decrease: float) -> tuple[dict, float, np.ndarray, float]:  # fmt: skip
     """The log's most active ``window_s`` (the whole log if shorter) and the fit refitted on it under the
     observer's own assumptions: the baseline every alternative is compared with (computed once per fit)."""
     key = _baseline_key(observer, window_s, gate, max_iter, tol, min_decrease)
-    cached = getattr(fit, "_window_baselines", None)
-    if cached is None:
-        cached = fit._window_baselines = {}
+    cached = _cache(fit)
     if key not in cached:
         rows = _continuation_rows(sensors, window_s)
         fit_from = float(np.asarray(rows["t"], dtype=float)[0]) + observer.settle_s
@@ -90,11 +102,8 @@ def _window_refit(observer: NeuroAdaptiveObserver, fit, base_key: tuple, rows: d
     The key holds every assumption the refit reads that may change between the checks (steering hold, yaw
     inertia, process noise, latency) and the refit's settings; the weight box and the prior precision are the
     fit's own."""
-    key = ("refit", base_key, observer.steering_hold, float(observer.vehicle.Iz), float(observer.force_error),
-           float(observer.latency), int(n_iter), float(gate), float(tol), float(min_decrease))  # fmt: skip
-    cached = getattr(fit, "_window_baselines", None)
-    if cached is None:
-        cached = fit._window_baselines = {}
+    key = ("refit", base_key, *_assumptions(observer), int(n_iter), float(gate), float(tol), float(min_decrease))
+    cached = _cache(fit)
     if key not in cached:
         lo, hi = observer._weight_box()
         w, _, costs, it = _gauss_newton(observer, rows, w_start, np.zeros_like(w_start), fit.prior_precision, lo, hi,
@@ -117,19 +126,10 @@ def _delayed_rows(rows: dict, delay: float) -> dict:
 def _delay_refit(observer: NeuroAdaptiveObserver, fit, base_key: tuple, rows: dict, fit_from: float,
                  w_start: np.ndarray, delay: float, n_iter: int, gate: float, tol: float,
                  min_decrease: float) -> tuple[np.ndarray, list, int]:  # fmt: skip
-    """As :func:`_window_refit`, with the window's steering ``delay`` [s] late (:func:`steering_delay_check`)."""
-    key = ("delay", base_key, float(delay), observer.steering_hold, float(observer.vehicle.Iz),
-           float(observer.force_error), float(observer.latency), int(n_iter), float(gate), float(tol),
-           float(min_decrease))  # fmt: skip
-    cached = getattr(fit, "_window_baselines", None)
-    if cached is None:
-        cached = fit._window_baselines = {}
-    if key not in cached:
-        lo, hi = observer._weight_box()
-        w, _, costs, it = _gauss_newton(observer, _delayed_rows(rows, delay), w_start, np.zeros_like(w_start),
-                                        fit.prior_precision, lo, hi, fit_from, gate, n_iter, tol, min_decrease)  # fmt: skip
-        cached[key] = (w, costs, it)
-    return cached[key]
+    """:func:`_window_refit` on the window with its steering ``delay`` [s] late (:func:`steering_delay_check`); the
+    delay joins the cache key."""
+    return _window_refit(observer, fit, (*base_key, "delay", float(delay)), _delayed_rows(rows, delay), fit_from,
+                         w_start, n_iter, gate, tol, min_decrease)  # fmt: skip
 
 
 def _delay_screen(observer: NeuroAdaptiveObserver, fit, base_key: tuple, rows: dict, fit_from: float,
@@ -139,11 +139,8 @@ def _delay_screen(observer: NeuroAdaptiveObserver, fit, base_key: tuple, rows: d
     (multi-body scenarios 0-7, low-order 0-9) the prediction exceeded the two-step refit's decrease on every one
     (by 0.3-200), so a prediction at or below the decisive level decides "consistent" without the refit
     (:func:`steering_delay_check`). Cached on the fit like the refits."""
-    key = ("delay_screen", base_key, float(delay), observer.steering_hold, float(observer.vehicle.Iz),
-           float(observer.force_error), float(observer.latency), float(gate))  # fmt: skip
-    cached = getattr(fit, "_window_baselines", None)
-    if cached is None:
-        cached = fit._window_baselines = {}
+    key = ("delay_screen", base_key, float(delay), *_assumptions(observer), float(gate))
+    cached = _cache(fit)
     if key not in cached:
         lo, hi = observer._weight_box()
         lam = fit.prior_precision
