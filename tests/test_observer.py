@@ -254,6 +254,41 @@ def test_latency_is_recovered_and_stiffness_learned_without_being_told():
     assert np.all(np.abs(k - np.array([V.Cf, V.Cr])) <= 2.0 * sd), (k / np.array([V.Cf, V.Cr]) - 1.0, sd / V.Cf)
 
 
+def test_latency_sigma_reads_the_profile_curvature():
+    """The latency's standard deviation is where its profile's cost (chi-square) rises by 1; a flat or concave
+    profile says the log does not show its latency (half the largest latency)."""
+    from tire_learning_env.observer.latency import latency_sigma
+
+    n, L0, sd = 400, 0.043, 0.004
+    grid = [0.0, 0.01, 0.02, 0.035, 0.04, 0.045, 0.05, 0.07, 0.1]
+    costs = {d: (2.0 * n + ((d - L0) / sd) ** 2) / n for d in grid}
+    assert math.isclose(latency_sigma(costs, n, 0.045, 0.15), sd, rel_tol=1e-6)
+    flat = {d: 2.0 for d in grid}
+    assert latency_sigma(flat, n, 0.0, 0.15) == 0.075
+
+
+def test_the_latency_estimates_own_uncertainty_is_in_the_band():
+    """A 27 ms latency lies between the profile's grid points (20 and 35 ms). Its standard deviation from the
+    profile holds the truth within two, and the stiffness's change per standard deviation (the delta method) is
+    added to the stiffness's variance, exactly."""
+    camera = CameraParams(rate=50.0, noise="gaussian", e1_noise=0.003, e2_noise=0.001, latency=0.027)
+    log = simulate("lane_changes", 40.0, camera=camera, seed=4)
+    res = estimate(log.sensors, V, config=ObserverConfig(sensors="camera"))
+    lat = res.calibration["latency"]
+    assert 0.0 < lat["latency_std_s"] < 0.01, lat["latency_std_s"]
+    assert abs(lat["latency_s"] - 0.027) <= 2.0 * lat["latency_std_s"], (lat["latency_s"], lat["latency_std_s"])
+    assert lat["sensitivity"]["stepped_to_s"][1] > lat["latency_s"]
+    G, _ = res.stiffness_functionals()
+    (d,) = res.fit.latency_alternatives
+    change = np.abs(G @ d)  # the stiffness's change per standard deviation of the latency
+    assert np.all(change > 0.0)
+    var = np.array(res.cornering_stiffness_std()) ** 2
+    res.fit.latency_alternatives = []
+    res.fit._sandwich_cache.clear()
+    without = np.array(res.cornering_stiffness_std()) ** 2
+    assert np.allclose(var - without, change**2, rtol=1e-6), (var - without, change**2)
+
+
 def test_a_straight_road_is_not_identifiable():
     """A good camera on a straight road: the driver barely steers (slip within +/-0.04 deg).
     (With the paper's +/-1 cm, +/-1 deg noise the driver's reactions to the noise reach

@@ -55,7 +55,8 @@ from .offline import hold_fit, refine
 from .prior_length import select_prior_length
 from .reexpression import lane_reexpressions, release_variance, shift_back
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
-from .sensitivity import prefetch_window_refits, steering_delay_check, steering_hold_sensitivity, yaw_dynamics_check
+from .sensitivity import (latency_sensitivity, prefetch_window_refits, steering_delay_check, steering_hold_sensitivity,
+                          yaw_dynamics_check)
 
 # names this module imported before its split (still importable from here)
 from ..params import _Params  # noqa: F401
@@ -486,7 +487,8 @@ def _estimate_once(
                 if not refit:
                     obs.latency = first
                     if model.name == "camera":
-                        prefetch_window_refits(obs, rows, fit, midpoint=midpoint, min_row_period=hold_min_period)
+                        prefetch_window_refits(obs, rows, fit, midpoint=midpoint, min_row_period=hold_min_period,
+                                               latency_sigma=lat2_info["latency_std_s"])
                 return lat2, lat2_info, gain, refit
 
             with ThreadPoolExecutor(max_workers=1) as pool:
@@ -533,6 +535,11 @@ def _estimate_once(
             t1 = time.perf_counter()  # and the timing of the steering's effect (tire relaxation, compliance)
             calibration["steering_delay"] = steering_delay_check(obs, rows, fit)
             runtime["steering_delay_check"] = time.perf_counter() - t1
+            if latency_given is None:  # and the latency's own uncertainty (from its profile)
+                t1 = time.perf_counter()
+                sigma = calibration["latency"]["latency_std_s"]
+                calibration["latency"]["sensitivity"] = latency_sensitivity(obs, rows, fit, sigma)
+                runtime["latency_sensitivity"] = time.perf_counter() - t1
         offline = fit.trace
         runtime["offline_refinement"] = time.perf_counter() - t0
         calibration["offline"] = {

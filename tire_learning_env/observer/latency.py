@@ -99,10 +99,32 @@ def _estimate_latency(obs: NeuroAdaptiveObserver, rows: dict, config: ObserverCo
                 best = round(xv, 4)
     obs.latency = best
     obs.reset()
+    sigma = latency_sigma(costs, updates[0], best, float(config.max_latency))
     return best, {
         "source": "estimated from the log (prediction-error profile)",
         "latency_s": best,
+        "latency_std_s": sigma,
         "profile_s_to_cost_per_update": {f"{k:.4f}": v for k, v in sorted(costs.items())},
         "window_s": [float(sub["t"][0]), float(sub["t"][-1])],
         "updates": updates[0],
     }
+
+
+def latency_sigma(costs: dict, updates: int, best: float, max_latency: float) -> float:
+    """The latency's standard deviation [s] from its profile: ``1 / sqrt(a)`` of the parabola ``J = a (L - L0)^2 +
+    c`` least-squares fitted to the profiled points within chi-square 25 of the best (``J`` the cost in chi-square
+    units, ``costs`` per update times ``updates``; the three nearest the best when fewer lie there), so that the
+    cost rises by 1 at one standard deviation. At most half ``max_latency`` (a flat or concave profile: the log
+    does not show its latency)."""
+    ds = np.array(sorted(costs))
+    J = np.array([costs[d] for d in ds]) * max(int(updates), 1)
+    Jmin = float(np.min(J))
+    use = J - Jmin <= 25.0
+    if use.sum() < 3:
+        use = np.zeros(len(ds), dtype=bool)
+        use[np.argsort(np.abs(ds - best))[:3]] = True
+    cap = 0.5 * max_latency
+    if use.sum() < 3:
+        return cap
+    a = np.polyfit(ds[use], J[use], 2)[0]
+    return float(min(1.0 / np.sqrt(a), cap)) if a > 0 else cap

@@ -125,13 +125,14 @@ class OfflineFit:
         :func:`.prior_length.select_prior_length`; the steering hold,
         :func:`.sensitivity.steering_hold_sensitivity`; the yaw dynamics when the log rejects
         the vehicle file's, :func:`.sensitivity.yaw_dynamics_check`; a steering lag when the log rejects
-        the lag-free model, :func:`.sensitivity.steering_delay_check`; the process noise where the
+        the lag-free model, :func:`.sensitivity.steering_delay_check`; the camera latency estimated from
+        the log, :func:`.sensitivity.latency_sensitivity`; the process noise where the
         innovations showed the model's own error, :func:`refine`), summed over the assumptions."""
         g = np.atleast_2d(g)
         out = np.zeros(g.shape[0])
         for alts in (getattr(self, "prior_alternatives", None) or [], getattr(self, "hold_alternatives", None) or [],
                      getattr(self, "dynamics_alternatives", None) or [], getattr(self, "mismatch_alternatives", None) or [],
-                     getattr(self, "delay_alternatives", None) or []):
+                     getattr(self, "delay_alternatives", None) or [], getattr(self, "latency_alternatives", None) or []):
             if alts:
                 out += np.max(np.vstack([(g @ d) ** 2 for d in alts]), axis=0)
         return out

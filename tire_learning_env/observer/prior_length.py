@@ -104,5 +104,6 @@ def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: Off
     new.hold_alternatives = getattr(fit, "hold_alternatives", [])
     new.dynamics_alternatives = getattr(fit, "dynamics_alternatives", [])
     new.delay_alternatives = getattr(fit, "delay_alternatives", [])
+    new.latency_alternatives = getattr(fit, "latency_alternatives", [])
     new.mismatch_alternatives = getattr(fit, "mismatch_alternatives", [])
     return new, info

@@ -24,8 +24,8 @@ from .box_step import _solve_step
 from .offline import OfflineFit, _continuation_rows, _gauss_newton, hold_fit
 from .passes import _pass
 
-__all__ = ["steering_hold_sensitivity", "yaw_dynamics_check", "steering_delay_check", "prefetch_window_baseline",
-           "prefetch_window_refits"]
+__all__ = ["steering_hold_sensitivity", "yaw_dynamics_check", "steering_delay_check", "latency_sensitivity",
+           "prefetch_window_baseline", "prefetch_window_refits"]
 
 #: The window and the refit of :func:`steering_hold_sensitivity` and :func:`yaw_dynamics_check` (their defaults):
 #: ``(window_s, gate, max_iter, tol, min_decrease)``.
@@ -153,6 +153,65 @@ def _delay_screen(observer: NeuroAdaptiveObserver, fit, base_key: tuple, rows: d
     return cached[key]
 
 
+def _latency_step(observer: NeuroAdaptiveObserver, fit, base_key: tuple, rows: dict, fit_from: float,
+                  w_start: np.ndarray, latency: float, gate: float) -> np.ndarray:
+    """The Gauss-Newton step [weights] from the window's baseline ``w_start`` with the camera ``latency`` [s]: one pass
+    (:func:`latency_sensitivity`). Cached on the fit like the refits."""
+    key = ("latency_step", base_key, float(latency), *_assumptions(observer)[:3], float(gate))
+    cached = _cache(fit)
+    if key not in cached:
+        lo, hi = observer._weight_box()
+        lam = fit.prior_precision
+        used = observer.latency
+        try:
+            observer.latency = float(latency)
+            acc, _ = _pass(observer, rows, w_start, fit_from, gate)
+        finally:
+            observer.latency = used
+        cached[key] = _solve_step(acc.hess + lam, acc.grad - lam @ w_start, w_start, lo, hi)
+    return cached[key]
+
+
+def latency_bracket(latency: float, sigma: float) -> tuple[float, float]:
+    """The latencies [s] :func:`latency_sensitivity` steps to: one standard deviation either side, the lower at least 0."""
+    return max(float(latency) - float(sigma), 0.0), float(latency) + float(sigma)
+
+
+def latency_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, sigma: float,
+                        gate: float = 25.0) -> dict:  # fmt: skip
+    """The estimated camera latency's own uncertainty, in the bands.
+
+    The latency is estimated from the log (:func:`.latency._estimate_latency`) with a standard deviation
+    ``sigma`` [s] from its profile. The stiffness leans on it: on the generalisation benchmark's highway drives
+    it moved 0.4-0.8 % per millisecond, and an estimate 1-4 ms off left the stiffness out of its band. The
+    weights' change per ``sigma`` is the difference of one Gauss-Newton step from the window's baseline at
+    ``latency - sigma`` (at least 0) and at ``latency + sigma``, scaled to ``2 sigma`` apart (both steps share the
+    baseline's own residual step, which cancels); it is kept in ``fit.latency_alternatives`` and the bands add
+    its squared projection (the delta method; :meth:`.offline.OfflineFit.prior_sensitivity`). The reported
+    weights stay.
+
+    Returns
+    -------
+    dict
+        The latency, its standard deviation, the latencies stepped to and the window.
+    """
+    window_s, _, max_iter, tol, min_decrease = WINDOW_REFIT
+    rows, fit_from, w_same, _ = _window_baseline(observer, sensors, fit, window_s, gate, max_iter, tol, min_decrease)
+    base = _baseline_key(observer, window_s, gate, max_iter, tol, min_decrease)
+    lo, hi = latency_bracket(observer.latency, sigma)
+    try:
+        step_lo = _latency_step(observer, fit, base, rows, fit_from, w_same, lo, gate)
+        step_hi = _latency_step(observer, fit, base, rows, fit_from, w_same, hi, gate)
+    finally:
+        hold_fit(observer, fit)
+    fit.latency_alternatives = [(step_hi - step_lo) * (float(sigma) / (hi - lo))] if hi > lo else []
+    t_w = np.asarray(rows["t"], dtype=float)
+    return {"latency_s": float(observer.latency), "latency_std_s": float(sigma), "stepped_to_s": [lo, hi],
+            "window_s": [float(t_w[0]), float(t_w[-1])],
+            "method": "the weights' change per standard deviation of the latency (one Gauss-Newton step from the "
+                      "window's fit at either end), added to the bands (delta method)"}  # fmt: skip
+
+
 def _other_hold(hold: str) -> str:
     """The steering hold :func:`steering_hold_sensitivity` refits under: the other one."""
     return "hold" if hold == "ramp" else "ramp"
@@ -165,11 +224,12 @@ def _row_period(sensors: dict) -> float:
 
 
 def prefetch_window_refits(observer: NeuroAdaptiveObserver, sensors: dict, fit, midpoint: bool = False,
-                           min_row_period: float = 0.002) -> None:
+                           min_row_period: float = 0.002, latency_sigma: float | None = None) -> None:
     """:func:`prefetch_window_baseline`, then the refits from it that :func:`yaw_dynamics_check` (its two
     inertias, :data:`YAW_FACTOR` and its inverse), :func:`steering_delay_check` (:data:`STEERING_DELAY`) and
     :func:`steering_hold_sensitivity` (the other hold;
-    ``midpoint`` and ``min_row_period`` as the caller will pass them) make with their defaults, ahead of them.
+    ``midpoint`` and ``min_row_period`` as the caller will pass them) make with their defaults, ahead of them,
+    and :func:`latency_sensitivity`'s two steps when ``latency_sigma`` [s] is given.
 
     Why: like the baseline, these refits need only the fit's weights and prior precision and the observer's
     assumptions, so :func:`.estimator.estimate` computes them on the thread that runs beside the fit's final
@@ -189,6 +249,9 @@ def prefetch_window_refits(observer: NeuroAdaptiveObserver, sensors: dict, fit, 
         observer.set_vehicle(vehicle)
     if c_same - _delay_screen(observer, fit, base, rows, fit_from, w_same, STEERING_DELAY, gate) > DELAY_DECISIVE_CHI2:
         _delay_refit(observer, fit, base, rows, fit_from, w_same, STEERING_DELAY, max_iter, gate, tol, min_decrease)
+    if latency_sigma is not None:
+        for latency in latency_bracket(observer.latency, latency_sigma):
+            _latency_step(observer, fit, base, rows, fit_from, w_same, latency, gate)
     if _row_period(sensors) < min_row_period:  # steering_hold_sensitivity skips the refit there
         return
     try:
