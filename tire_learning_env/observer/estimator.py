@@ -535,11 +535,11 @@ def _estimate_once(
             t1 = time.perf_counter()  # and the timing of the steering's effect (tire relaxation, compliance)
             calibration["steering_delay"] = steering_delay_check(obs, rows, fit)
             runtime["steering_delay_check"] = time.perf_counter() - t1
-            if latency_given is None:  # and the latency's own uncertainty (from its profile)
-                t1 = time.perf_counter()
-                sigma = calibration["latency"]["latency_std_s"]
-                calibration["latency"]["sensitivity"] = latency_sensitivity(obs, rows, fit, sigma)
-                runtime["latency_sensitivity"] = time.perf_counter() - t1
+        if again:  # a camera latency estimated from the log (camera or fused): its own uncertainty, from its profile
+            t1 = time.perf_counter()
+            sigma = calibration["latency"]["latency_std_s"]
+            calibration["latency"]["sensitivity"] = latency_sensitivity(obs, rows, fit, sigma)
+            runtime["latency_sensitivity"] = time.perf_counter() - t1
         offline = fit.trace
         runtime["offline_refinement"] = time.perf_counter() - t0
         calibration["offline"] = {
