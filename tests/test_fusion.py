@@ -129,6 +129,9 @@ def test_fused_estimate_keeps_working_through_a_camera_and_an_imu_dropout(log, r
     k, sd = np.array(res.cornering_stiffness()), np.array(res.cornering_stiffness_std())
     true_k = np.array([log.vehicle.Cf, log.vehicle.Cr])
     assert np.all(np.abs(k - true_k) <= 2.0 * sd) and np.all(np.abs(k / true_k - 1) < 0.03)
+    # the camera latency it estimated carries its own uncertainty into the bands, as on a camera log
+    assert res.calibration["latency"]["sensitivity"]["latency_std_s"] > 0.0
+    assert len(res.fit.latency_alternatives) == 1
 
 
 def test_online_fused_design_is_not_the_camera_design(log):
