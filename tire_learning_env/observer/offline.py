@@ -49,6 +49,12 @@ __all__ = ["OfflineFit", "PendingFit", "refine", "stiffness_gradient", "curve_gr
            "hold_fit", "pass_pieces", "pass_threads"]
 
 
+#: The fit's attributes holding, per assumption the log cannot settle, the weight changes of its plausible
+#: alternatives (:meth:`OfflineFit.prior_sensitivity` adds them to the bands; a refit carries them over).
+ALTERNATIVES = ("prior_alternatives", "hold_alternatives", "dynamics_alternatives", "mismatch_alternatives",
+                "delay_alternatives", "latency_alternatives")
+
+
 @dataclass
 class OfflineFit:
     """Result of :func:`refine`.
@@ -130,9 +136,8 @@ class OfflineFit:
         innovations showed the model's own error, :func:`refine`), summed over the assumptions."""
         g = np.atleast_2d(g)
         out = np.zeros(g.shape[0])
-        for alts in (getattr(self, "prior_alternatives", None) or [], getattr(self, "hold_alternatives", None) or [],
-                     getattr(self, "dynamics_alternatives", None) or [], getattr(self, "mismatch_alternatives", None) or [],
-                     getattr(self, "delay_alternatives", None) or [], getattr(self, "latency_alternatives", None) or []):
+        for name in ALTERNATIVES:
+            alts = getattr(self, name, None) or []
             if alts:
                 out += np.max(np.vstack([(g @ d) ** 2 for d in alts]), axis=0)
         return out

@@ -12,7 +12,7 @@ import numpy as np
 
 from .neuro_adaptive import NeuroAdaptiveObserver
 from .box_step import _solve_step
-from .offline import OfflineFit, _final_fit, _gauss_newton
+from .offline import ALTERNATIVES, OfflineFit, _final_fit, _gauss_newton
 
 __all__ = ["select_prior_length"]
 
@@ -100,10 +100,6 @@ def select_prior_length(observer: NeuroAdaptiveObserver, sensors: dict, fit: Off
     new = _final_fit(observer, sensors, w, Lam, fit_from, gate, list(fit.cost) + costs, fit.iterations + it)
     new.force_error = fit.force_error
     new.force_error_calibration = fit.force_error_calibration
-    new.prior_alternatives = getattr(fit, "prior_alternatives", [])
-    new.hold_alternatives = getattr(fit, "hold_alternatives", [])
-    new.dynamics_alternatives = getattr(fit, "dynamics_alternatives", [])
-    new.delay_alternatives = getattr(fit, "delay_alternatives", [])
-    new.latency_alternatives = getattr(fit, "latency_alternatives", [])
-    new.mismatch_alternatives = getattr(fit, "mismatch_alternatives", [])
+    for name in ALTERNATIVES:
+        setattr(new, name, getattr(fit, name, []))
     return new, info

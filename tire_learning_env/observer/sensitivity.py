@@ -132,6 +132,20 @@ def _delay_refit(observer: NeuroAdaptiveObserver, fit, base_key: tuple, rows: di
                          w_start, n_iter, gate, tol, min_decrease)  # fmt: skip
 
 
+def _one_step(observer: NeuroAdaptiveObserver, fit, rows: dict, fit_from: float, w_start: np.ndarray,
+              gate: float) -> tuple[np.ndarray, float, float]:
+    """One pass at ``w_start`` under the observer's current assumptions and the Gauss-Newton step from it:
+    ``(step, cost at w_start, the step's predicted cost decrease)`` [weights, chi-square, chi-square]
+    (:func:`_delay_screen`, :func:`_latency_step`)."""
+    lo, hi = observer._weight_box()
+    lam = fit.prior_precision
+    acc, _ = _pass(observer, rows, w_start, fit_from, gate)
+    A = acc.hess + lam
+    rhs = acc.grad - lam @ w_start
+    dw = _solve_step(A, rhs, w_start, lo, hi)
+    return dw, float(acc.stats[0] + w_start @ lam @ w_start), 2.0 * float(rhs @ dw) - float(dw @ A @ dw)
+
+
 def _delay_screen(observer: NeuroAdaptiveObserver, fit, base_key: tuple, rows: dict, fit_from: float,
                   w_start: np.ndarray, delay: float, gate: float) -> float:
     """The cost decrease [chi-square] one Gauss-Newton step from the window's baseline predicts with the steering
@@ -142,14 +156,8 @@ def _delay_screen(observer: NeuroAdaptiveObserver, fit, base_key: tuple, rows: d
     key = ("delay_screen", base_key, float(delay), *_assumptions(observer), float(gate))
     cached = _cache(fit)
     if key not in cached:
-        lo, hi = observer._weight_box()
-        lam = fit.prior_precision
-        acc, _ = _pass(observer, _delayed_rows(rows, delay), w_start, fit_from, gate)
-        A = acc.hess + lam
-        rhs = acc.grad - lam @ w_start
-        dw = _solve_step(A, rhs, w_start, lo, hi)
-        cost = float(acc.stats[0] + w_start @ lam @ w_start)
-        cached[key] = cost - (2.0 * float(rhs @ dw) - float(dw @ A @ dw))
+        _, cost, decrease = _one_step(observer, fit, _delayed_rows(rows, delay), fit_from, w_start, gate)
+        cached[key] = cost - decrease
     return cached[key]
 
 
@@ -157,18 +165,15 @@ def _latency_step(observer: NeuroAdaptiveObserver, fit, base_key: tuple, rows: d
                   w_start: np.ndarray, latency: float, gate: float) -> np.ndarray:
     """The Gauss-Newton step [weights] from the window's baseline ``w_start`` with the camera ``latency`` [s]: one pass
     (:func:`latency_sensitivity`). Cached on the fit like the refits."""
-    key = ("latency_step", base_key, float(latency), *_assumptions(observer)[:3], float(gate))
     cached = _cache(fit)
-    if key not in cached:
-        lo, hi = observer._weight_box()
-        lam = fit.prior_precision
-        used = observer.latency
-        try:
-            observer.latency = float(latency)
-            acc, _ = _pass(observer, rows, w_start, fit_from, gate)
-        finally:
-            observer.latency = used
-        cached[key] = _solve_step(acc.hess + lam, acc.grad - lam @ w_start, w_start, lo, hi)
+    used = observer.latency
+    try:
+        observer.latency = float(latency)
+        key = ("latency_step", base_key, *_assumptions(observer), float(gate))  # the latency stepped to among them
+        if key not in cached:
+            cached[key] = _one_step(observer, fit, rows, fit_from, w_start, gate)[0]
+    finally:
+        observer.latency = used
     return cached[key]
 
 
