@@ -37,8 +37,9 @@ def parse_variant(text: str) -> dict:
     return out
 
 
-def run(i: int, variant: dict) -> list[dict]:
-    """The scenario with its camera changed by ``variant``, estimated without and with the true latency."""
+def run(i: int, variant: dict, details: bool = False) -> list[dict]:
+    """The scenario with its camera changed by ``variant``, estimated without and with the true latency
+    (``details``: each record also holds the estimate's ``calibration["latency"]``)."""
     from tire_learning_env.observer import ObserverConfig, estimate
 
     sc0 = bg.sample_scenario(hf.HIGHWAY, i, 15, False)
@@ -59,6 +60,8 @@ def run(i: int, variant: dict) -> list[dict]:
                     "latency_std_ms": None if "latency_std_s" not in lat else 1e3 * lat["latency_std_s"],
                     "stiffness_error_pct": (100.0 * (k / kt - 1.0)).tolist(), "band_2sigma_pct": (200.0 * sd / kt).tolist(),
                     "covered_2sigma": (np.abs(k - kt) <= 2.0 * sd).tolist(), "verdict": res.verdict})  # fmt: skip
+        if details:
+            out[-1]["calibration_latency"] = lat
     return out
 
 
