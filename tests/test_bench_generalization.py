@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_generalization.py"
@@ -235,3 +236,23 @@ def test_a_latency_the_refined_profile_finds_near_the_first_is_used(bg):
     assert abs(run["latency_used_ms"] - run["latency_true_ms"]) <= 2.0 * run["latency_std_ms"], run
     assert all(run["covered_2sigma"]), (run["stiffness_error_pct"], run["band_2sigma_pct"])
     assert told["latency_told"] and all(abs(e) < 1.0 for e in told["stiffness_error_pct"])
+
+
+def test_a_1khz_imu_preference_short_of_decisive_keeps_the_other_hold_in_the_band(bg):
+    """The IMU family's scenario imu_white 9: a sampled continuous steering wheel at 1 kHz rows. The fit prefers the
+    held steering by chi-square 13.7, above the 10 that decides at sparser rows but short of the 100 that rows closer
+    than 2 ms need (half a millisecond of timing apart): the held answer (+0.30 / +0.28 %) is reported with the
+    ramped one (+0.01 / +0.03 %) inside its band. Decided at 10 its band (+/-0.17 / 0.14 %) missed. About 25 s."""
+    from tire_learning_env.imu import estimate_imu
+
+    sc = bg.sample_scenario("imu_white", 9, 15, False)
+    sc, (sensors, _, _, nominal, tv), _, _ = bg._build_with_redraws(
+        sc, bg.build_imu, lambda b: bg.imu_truth_summary(b[1], b[2]))  # fmt: skip
+    assert sc["rate_hz"] == 1000.0
+    core = estimate_imu(sensors, nominal).core
+    info = core.calibration["steering_hold"]
+    assert 10.0 < info["cost_decrease_under_other_chi2"] < info["decisive_chi2"] == 100.0, info
+    assert info["used"] == "hold" and info.get("refitted") and len(core.fit.hold_alternatives) == 1, info
+    k, sd = np.array(core.cornering_stiffness()), np.array(core.cornering_stiffness_std())
+    truth = np.array([tv.Cf, tv.Cr])
+    assert np.all(np.abs(k - truth) <= 2.0 * sd), ((k / truth - 1.0) * 100, 200 * sd / truth)
