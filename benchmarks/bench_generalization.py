@@ -106,7 +106,8 @@ scenarios an earlier run finished.
 
 Run: ``python benchmarks/bench_generalization.py [--n 5] [--workers 2] [--quick] [--long] [--resume]``;
 issue 16's families: ``python benchmarks/bench_generalization.py --families imu_white,imu_vibration_bias,fused``;
-highway-env traffic: ``python benchmarks/bench_generalization.py --families highway_traffic --n 10``
+highway-env traffic: ``python benchmarks/bench_generalization.py --families highway_traffic --n 10``;
+chosen scenarios only (e.g. those a change touches): ``--scenarios imu_white:4,imu_white:9``.
 """
 
 from __future__ import annotations
@@ -1047,7 +1048,8 @@ def markdown_table(result: dict) -> str:
             lines.append("")
         lines += _markdown_extra(result, f)
     s = result.get("settings", {})
-    lines += ["", f"n = {s.get('n_per_family')} per family, seed {s.get('seed')}, quick = {s.get('quick')}; statistics over "
+    which = (f"scenarios {', '.join(s['scenarios'])}" if s.get("scenarios") else f"n = {s.get('n_per_family')} per family")
+    lines += ["", f"{which}, seed {s.get('seed')}, quick = {s.get('quick')}; statistics over "
               "scenarios whose truth stayed under control (see `truth_invalid_scenarios`), both axles pooled; "
               "runtime over all scenarios."]  # fmt: skip
     return "\n".join(lines) + "\n"
@@ -1156,6 +1158,23 @@ def code_version() -> dict:
         return {"git_head": None}
 
 
+def parse_scenarios(text: str) -> list[tuple[str, int]]:
+    """``"family:index,family:index"`` -> ``[(family, index), ...]`` (``--scenarios``: re-run the scenarios a change
+    touches, e.g. ``imu_white:4,imu_white:9``). An unknown family or an index that is not a whole number >= 0 is a
+    ``ValueError`` naming the item."""
+    out = []
+    for item in filter(None, (p.strip() for p in text.split(","))):
+        family, sep, index = item.partition(":")
+        if not sep or family not in ALL_FAMILIES:
+            raise ValueError(f"--scenarios item {item!r}: expected FAMILY:INDEX with FAMILY one of {', '.join(ALL_FAMILIES)}")
+        if not index.isdigit():
+            raise ValueError(f"--scenarios item {item!r}: the index must be a whole number >= 0")
+        out.append((family, int(index)))
+    if not out:
+        raise ValueError("--scenarios is empty")
+    return out
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=None, help="scenarios per family (default 5; --quick: 2)")
@@ -1168,6 +1187,9 @@ def main(argv: list[str] | None = None) -> dict:
                     "scenario, not the estimator's code: rerun without it after a change)")
     ap.add_argument("--families", default=",".join(FAMILIES),
                     help=f"comma-separated, of {', '.join(ALL_FAMILIES)} (default: the camera families)")
+    ap.add_argument("--scenarios", default=None,
+                    help="only these scenarios, FAMILY:INDEX comma-separated (e.g. imu_white:4,imu_white:9; instead "
+                    "of --families and --n)")
     ap.add_argument("--long", action="store_true", help="also time one long 100 Hz lane-change log")
     ap.add_argument("--long-minutes", type=float, default=30.0)
     ap.add_argument("--out", default=None)
@@ -1192,13 +1214,23 @@ def main(argv: list[str] | None = None) -> dict:
     unknown = [f for f in families if f not in ALL_FAMILIES]
     if unknown:
         ap.error(f"unknown families {unknown}; choose from {', '.join(ALL_FAMILIES)}")
+    chosen = None
+    if args.scenarios is not None:
+        try:
+            chosen = parse_scenarios(args.scenarios)
+        except ValueError as exc:
+            ap.error(str(exc))
+        families = list(dict.fromkeys(f for f, _ in chosen))
     stem = "generalization_imu" if families and all(f in EXTRA_FAMILIES for f in families) else "generalization"
     if families and all(f in HIGHWAY_FAMILIES for f in families):
         stem = "generalization_highway"
     out_path = Path(args.out) if args.out else RESULTS_DIR / (f"{stem}_quick.json" if args.quick else f"{stem}.json")
-    scenarios = [sample_scenario(f, i, args.seed, args.quick) for f in families for i in range(n)]
+    pairs = chosen if chosen is not None else [(f, i) for f in families for i in range(n)]
+    scenarios = [sample_scenario(f, i, args.seed, args.quick) for f, i in pairs]
     meta = {
-        "settings": {"n_per_family": n, "quick": args.quick, "seed": args.seed, "workers": args.workers, "families": families},
+        "settings": {"n_per_family": n if chosen is None else None, "quick": args.quick, "seed": args.seed,
+                     "workers": args.workers, "families": families,
+                     **({"scenarios": [f"{f}:{i}" for f, i in chosen]} if chosen is not None else {})},
         "observer_call": 'estimate(log.sensors, nominal_vehicle, config=ObserverConfig(sensors="camera")) -- defaults, no camera spec',
         "ukf_call": "run_ukf_baseline(log.sensors, nominal_vehicle, CameraParams(rate=<median frame spacing>, noise='gaussian', "
                     "e1_noise/e2_noise=<estimate_noise_std on the log>)) -- no oracle noise, latency or dropout",

@@ -256,3 +256,15 @@ def test_a_1khz_imu_preference_short_of_decisive_keeps_the_other_hold_in_the_ban
     k, sd = np.array(core.cornering_stiffness()), np.array(core.cornering_stiffness_std())
     truth = np.array([tv.Cf, tv.Cr])
     assert np.all(np.abs(k - truth) <= 2.0 * sd), ((k / truth - 1.0) * 100, 200 * sd / truth)
+
+
+def test_scenarios_option_names_a_bad_item(bg, tmp_path):
+    """``--scenarios FAMILY:INDEX,...`` re-runs chosen scenarios; a bad item is an error naming it."""
+    assert bg.parse_scenarios("imu_white:4, imu_vibration_bias:17") == [("imu_white", 4), ("imu_vibration_bias", 17)]
+    for bad, words in (("imu_white", "FAMILY:INDEX"), ("no_such_family:1", "FAMILY:INDEX"), ("imu_white:-1", "whole number"),
+                       ("imu_white:x", "whole number"), (",", "empty")):  # fmt: skip
+        with pytest.raises(ValueError, match=words):
+            bg.parse_scenarios(bad)
+    proc = subprocess.run([sys.executable, str(BENCH), "--scenarios", "imu_white:four", "--out", str(tmp_path / "g.json")],
+                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert proc.returncode == 2 and "'imu_white:four'" in proc.stderr and not (tmp_path / "g.json").exists()
