@@ -470,8 +470,7 @@ def _estimate_once(
         # so the midpoint and a band that reaches both, as for sparser rows. IMU and fused logs at every row rate too
         # (their a_y decides between the holds by cost): a package drive's exact 1 kHz IMU read the stiffness
         # -0.49 / -0.70 % ramped with a standard deviation of 0.09 / 0.13 %, -0.07 / -0.08 % held; a 2 ms floor
-        # had kept the ramp there
-        hold_min_period = 0.0
+        # had kept the ramp there (sensitivity.steering_hold_sensitivity's min_row_period, now 0 by default)
         if again:  # the latency again, from the refined curve
             first = obs.latency
 
@@ -493,7 +492,7 @@ def _estimate_once(
                 if not refit:
                     obs.latency = first
                     if model.name == "camera":
-                        prefetch_window_refits(obs, rows, fit, midpoint=midpoint, min_row_period=hold_min_period,
+                        prefetch_window_refits(obs, rows, fit, midpoint=midpoint,
                                                latency_sigma=lat2_info["latency_std_s"])
                 return lat2, lat2_info, gain, refit
 
@@ -521,9 +520,8 @@ def _estimate_once(
         fit, calibration["prior_length"] = select_prior_length(obs, rows, fit, choose=False)
         # the other steering hold: how much the answer leans on what the steering did between rows (with
         # an IMU the a_y innovations show the steering's timing and the fit decides between the holds; ``midpoint``
-        # and ``hold_min_period`` above)
-        hold_info = steering_hold_sensitivity(obs, rows, fit, decide_by_cost=model.uses_imu, midpoint=midpoint,
-                                              min_row_period=hold_min_period)
+        # and the row rates above)
+        hold_info = steering_hold_sensitivity(obs, rows, fit, decide_by_cost=model.uses_imu, midpoint=midpoint)
         if hold_info.get("switch"):
             kept = list(fit.hold_alternatives)  # preferred, not decisively (fast rows): the other's answer stays in
             obs.steering_hold = hold_info["other"]

@@ -229,7 +229,7 @@ def _row_period(sensors: dict) -> float:
 
 
 def prefetch_window_refits(observer: NeuroAdaptiveObserver, sensors: dict, fit, midpoint: bool = False,
-                           min_row_period: float = 0.002, latency_sigma: float | None = None) -> None:
+                           min_row_period: float = 0.0, latency_sigma: float | None = None) -> None:
     """:func:`prefetch_window_baseline`, then the refits from it that :func:`yaw_dynamics_check` (its two
     inertias, :data:`YAW_FACTOR` and its inverse), :func:`steering_delay_check` (:data:`STEERING_DELAY`) and
     :func:`steering_hold_sensitivity` (the other hold;
@@ -269,7 +269,7 @@ def prefetch_window_refits(observer: NeuroAdaptiveObserver, sensors: dict, fit, 
 
 def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fit: OfflineFit, gate: float = 25.0,
                               max_iter: int = 2, tol: float = 1e-3, min_decrease: float = 1e-2,
-                              min_row_period: float = 0.002, window_s: float = 300.0, decide_by_cost: bool = False,
+                              min_row_period: float = 0.0, window_s: float = 300.0, decide_by_cost: bool = False,
                               decisive_chi2: float = 10.0, midpoint: bool = False,
                               alternative_iter: int | None = None, fast_rows: tuple[float, float] = (0.002, 100.0),
                               ) -> dict:  # fmt: skip
@@ -282,9 +282,9 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
     tell (the learned curve and the latency absorb a wrong choice), so the answer's change
     under the other hold is reported as uncertainty: half of it is one standard deviation
     (the two holds bracket what the steering did). Rows closer than ``min_row_period`` [s]
-    are skipped (the two holds differ by less than half a row there); :func:`.estimator.estimate`
-    passes 0 for every log: a camera log's answer moves 0.1-0.5 % between the holds even at 1 kHz rows
-    (a package drive's steering steps at a frame's row in reaction to that frame's noise; an
+    are skipped (the two holds differ by less than half a row there). The default, 0, asks at every
+    row rate, as :func:`.estimator.estimate` does (it had skipped IMU logs below 2 ms): a camera log's
+    answer moves 0.1-0.5 % between the holds even at 1 kHz rows (a package drive's steering steps at a frame's row in reaction to that frame's noise; an
     independent generator's steering is smooth: the two preferred opposite holds), and an exact 1 kHz
     IMU's by 0.5-0.8 %, ten of its standard deviations (the cost decides there: chi-square 840-950).
     A log longer than ``window_s`` [s] is refitted under both holds on its most active window
