@@ -258,6 +258,28 @@ def test_a_1khz_imu_preference_short_of_decisive_keeps_the_other_hold_in_the_ban
     assert np.all(np.abs(k - truth) <= 2.0 * sd), ((k / truth - 1.0) * 100, 200 * sd / truth)
 
 
+@pytest.mark.slow
+def test_a_fused_answer_that_leans_on_the_process_noise_says_so(bg):
+    """The fused family's scenario 15 (sedan on curves, a 100 Hz camera whose noise the driver answers at every frame,
+    a 200 Hz IMU with a_y noise 0.4 m/s^2): the fit stops at the smallest process noise (0.75 N) and reads
+    +0.69 / +0.38 %; one stage up (2.5 N, as consistent by the NIS) it reads about 0.4 / 0.2 points lower. Without
+    that change in the bands (+/-0.37 / 0.32 %) both axles missed; over six IMU noise realisations of the drive the
+    answer stayed at +0.57 to +0.73 %: the drive's bias, not noise. About 30 s."""
+    from tire_learning_env.observer import ObserverConfig, estimate
+
+    sc = bg.sample_scenario("fused", 15, 15, False)
+    sc, (log, _, _, nominal, _, k_true), _, _ = bg._build_with_redraws(
+        sc, bg.build, lambda b: bg.truth_summary(b[0], b[1], sc))  # fmt: skip
+    sensors = bg.add_imu_channels(log.sensors, sc["imu"], sc["sim_seed"])
+    res = estimate(sensors, nominal, config=ObserverConfig(sensors="both"))
+    k, sd, truth = np.array(res.cornering_stiffness()), np.array(res.cornering_stiffness_std()), np.array(k_true)
+    G, _ = res.stiffness_functionals()
+    (change,) = res.fit.process_noise_alternatives
+    assert np.all(100.0 * (G @ change) / truth < -0.15), 100.0 * (G @ change) / truth  # one stage up reads lower
+    assert np.all(k > truth), (k / truth - 1.0) * 100  # the case: read high
+    assert np.all(np.abs(k - truth) <= 2.0 * sd), ((k / truth - 1.0) * 100, 200 * sd / truth)
+
+
 def test_scenarios_option_names_a_bad_item(bg, tmp_path):
     """``--scenarios FAMILY:INDEX,...`` re-runs chosen scenarios; a bad item is an error naming it."""
     assert bg.parse_scenarios("imu_white:4, imu_vibration_bias:17") == [("imu_white", 4), ("imu_vibration_bias", 17)]

@@ -55,8 +55,8 @@ from .offline import hold_fit, refine
 from .prior_length import select_prior_length
 from .reexpression import lane_reexpressions, release_variance, shift_back
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
-from .sensitivity import (latency_sensitivity, prefetch_window_refits, steering_delay_check, steering_hold_sensitivity,
-                          yaw_dynamics_check)
+from .sensitivity import (latency_sensitivity, prefetch_window_refits, process_noise_sensitivity, steering_delay_check,
+                          steering_hold_sensitivity, yaw_dynamics_check)
 
 # names this module imported before its split (still importable from here)
 from ..params import _Params  # noqa: F401
@@ -533,6 +533,10 @@ def _estimate_once(
             fit.hold_alternatives = kept
             hold_info = dict(hold_info, other=calibration["steering_hold"]["used"], refitted=True)
         calibration["steering_hold"].update(hold_info, used=obs.steering_hold)
+        if model.name == "both":  # the process noise one stage up: the fused answer leaned on it beyond its band
+            t1 = time.perf_counter()
+            calibration["process_noise"] = process_noise_sensitivity(obs, rows, fit)
+            runtime["process_noise_sensitivity"] = time.perf_counter() - t1
         if model.name == "camera":  # the yaw dynamics the stiffness leans on: the log may reject the file's
             t1 = time.perf_counter()
             calibration["yaw_dynamics"] = yaw_dynamics_check(obs, rows, fit)

@@ -52,7 +52,7 @@ __all__ = ["OfflineFit", "PendingFit", "refine", "stiffness_gradient", "curve_gr
 #: The fit's attributes holding, per assumption the log cannot settle, the weight changes of its plausible
 #: alternatives (:meth:`OfflineFit.prior_sensitivity` adds them to the bands; a refit carries them over).
 ALTERNATIVES = ("prior_alternatives", "hold_alternatives", "dynamics_alternatives", "mismatch_alternatives",
-                "delay_alternatives", "latency_alternatives")
+                "delay_alternatives", "latency_alternatives", "process_noise_alternatives")
 
 
 @dataclass
@@ -133,7 +133,9 @@ class OfflineFit:
         the vehicle file's, :func:`.sensitivity.yaw_dynamics_check`; a steering lag when the log rejects
         the lag-free model, :func:`.sensitivity.steering_delay_check`; the camera latency estimated from
         the log, :func:`.sensitivity.latency_sensitivity`; the process noise where the
-        innovations showed the model's own error, :func:`refine`), summed over the assumptions."""
+        innovations showed the model's own error, :func:`refine`, or, for camera and IMU fused, one
+        stage above the chosen one, :func:`.sensitivity.process_noise_sensitivity`), summed over the
+        assumptions."""
         g = np.atleast_2d(g)
         out = np.zeros(g.shape[0])
         for name in ALTERNATIVES:
