@@ -51,7 +51,7 @@ from .gains import synthesize_gains
 from .latency import _estimate_latency, _profile_window  # noqa: F401  (_profile_window: re-exported)
 from .model import MeasurementModel, StateIndex, measurement_model
 from .neuro_adaptive import HealthParams, NeuroAdaptiveObserver
-from .offline import hold_fit, refine
+from .offline import FORCE_ERROR_STAGES, hold_fit, refine
 from .prior_length import select_prior_length
 from .reexpression import lane_reexpressions, release_variance, shift_back
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
@@ -504,7 +504,7 @@ def _estimate_once(
             calibration["latency"] = dict(lat2_info, first_profile=calibration["latency"])
             if refit:  # refit from the refined weights, from the stage reached
                 frac = fit.force_error / (0.5 * vehicle.m * 9.81)
-                stages = tuple(f for f in (3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4) if f <= frac * 1.0001) or (frac,)
+                stages = tuple(f for f in FORCE_ERROR_STAGES if f <= frac * 1.0001) or (frac,)
                 # the stage reached and the next one down (the rest of the continuation was measured to cost
                 # a second whole refinement on a 30 min log for no change of the answer)
                 fit = refine(obs, rows, fit.weights, prior_cov=obs.prior_covariance(offline=True),

@@ -49,6 +49,9 @@ __all__ = ["OfflineFit", "PendingFit", "refine", "stiffness_gradient", "curve_gr
            "hold_fit", "pass_pieces", "pass_threads"]
 
 
+#: The process-noise stages of :func:`refine` (force error as fractions of the mean static axle load), largest first.
+FORCE_ERROR_STAGES = (3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4)
+
 #: The fit's attributes holding, per assumption the log cannot settle, the weight changes of its plausible
 #: alternatives (:meth:`OfflineFit.prior_sensitivity` adds them to the bands; a refit carries them over).
 ALTERNATIVES = ("prior_alternatives", "hold_alternatives", "dynamics_alternatives", "mismatch_alternatives",
@@ -256,7 +259,7 @@ def refine(
     max_iter: int = 4,
     tol: float = 1e-3,
     gate: float = 25.0,
-    force_errors: tuple[float, ...] = (3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4),
+    force_errors: tuple[float, ...] = FORCE_ERROR_STAGES,
     nis_limit: float = 1.3,
     continuation_iter: int = 2,
     continuation_s: float = 300.0,

@@ -42,8 +42,8 @@ YAW_FACTOR = 0.85
 STEERING_DELAY = 0.01
 DELAY_DECISIVE_CHI2 = 10.0
 
-#: The ratio of neighbouring process-noise stages of :func:`.offline.refine` (``3e-2, 1e-2, ... 1e-4``: 10 / 3 on
-#: average), by which :func:`process_noise_sensitivity` raises the chosen force error.
+#: The factor by which :func:`process_noise_sensitivity` raises the chosen force error: one stage of
+#: :data:`.offline.FORCE_ERROR_STAGES`, whose neighbours are 3 or 10/3 apart (the larger of the two).
 PROCESS_NOISE_STEP = 10.0 / 3.0
 
 
@@ -545,7 +545,7 @@ def process_noise_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
     answer stayed at +0.57 to +0.73 %, a bias of the drive, not noise the band could hold.
     So the weights are refitted (on the log's most active ``window_s``, from the window's
     baseline, ``max_iter`` Gauss-Newton steps) with the force error ``step`` times the
-    chosen one (the next stage up), and the change is kept in
+    chosen one (one stage up: the stages are 3 or 10/3 apart), and the change is kept in
     ``fit.process_noise_alternatives``: the bands add it as every assumption the log cannot
     settle (:meth:`.offline.OfflineFit.prior_sensitivity`). The reported weights stay.
 
