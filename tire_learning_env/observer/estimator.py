@@ -55,8 +55,8 @@ from .offline import FORCE_ERROR_STAGES, hold_fit, refine
 from .prior_length import select_prior_length
 from .reexpression import lane_reexpressions, release_variance, shift_back
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
-from .sensitivity import (latency_sensitivity, prefetch_window_refits, process_noise_sensitivity, steering_delay_check,
-                          steering_hold_sensitivity, yaw_dynamics_check)
+from .sensitivity import (SMOOTH_STEERING_ROUGHNESS, latency_sensitivity, prefetch_window_refits, process_noise_sensitivity,
+                          steering_delay_check, steering_hold_sensitivity, steering_roughness, yaw_dynamics_check)
 
 # names this module imported before its split (still importable from here)
 from ..params import _Params  # noqa: F401
@@ -460,8 +460,18 @@ def _estimate_once(
         # a camera log whose rows lie between its frames: the midpoint of the two holds (a simulator's rows at its
         # step hold the steering; rows decimated from a faster drive ramp); rows that are the frames themselves
         # come from a drive faster than its frames, so the ramp is kept (sensitivity.steering_hold_sensitivity)
-        midpoint = (model.name == "camera" and config.steering_hold is None
+        # -- unless the logged steering is smooth at the row rate (steering_roughness): then the line between the
+        # rows is the signal's reconstruction, not one of two guesses, and the ramp is reported (the hold's answer
+        # stays in the band). An independent generator's 100 Hz logs (a driver through an 80 ms actuator, roughness
+        # 0.22-0.40) read +1.2 to +2.8 % front, +2.1 to +5.5 % rear at the midpoint, -0.22 to +0.65 / -0.29 to
+        # +0.88 % ramped, +2.1 to +4.1 / +3.0 to +7.4 % held; every drive of the package's simulator steps the
+        # steering at its frames (roughness 1.41), where the midpoint stays
+        roughness = steering_roughness(rows["t"], rows["delta"])
+        smooth = bool(roughness < SMOOTH_STEERING_ROUGHNESS)
+        midpoint = (model.name == "camera" and config.steering_hold is None and not smooth
                     and float(np.mean(np.isfinite(rows["e1"]))) < 0.6)  # frames on fewer than 60 % of the rows
+        calibration["steering_hold"]["roughness"] = roughness
+        calibration["steering_hold"]["smooth"] = smooth
         # camera logs: at every row rate, 1 kHz rows included. There the two holds are half a millisecond apart,
         # and yet the answers 0.1-0.5 % (measured on two simulators that both hold the steering over their step:
         # the package's closed-loop drives, whose driver steps the steering at each frame's row in reaction to its
