@@ -55,8 +55,9 @@ from .offline import FORCE_ERROR_STAGES, hold_fit, refine
 from .prior_length import select_prior_length
 from .reexpression import lane_reexpressions, release_variance, shift_back
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
-from .sensitivity import (SMOOTH_STEERING_ROUGHNESS, latency_sensitivity, prefetch_window_refits, process_noise_sensitivity,
-                          steering_delay_check, steering_hold_sensitivity, steering_roughness, yaw_dynamics_check)
+from .rows import SMOOTH_STEERING_ROUGHNESS, steering_roughness
+from .sensitivity import (latency_sensitivity, prefetch_window_refits, process_noise_sensitivity, steering_delay_check,
+                          steering_hold_sensitivity, yaw_dynamics_check)
 
 # names this module imported before its split (still importable from here)
 from ..params import _Params  # noqa: F401

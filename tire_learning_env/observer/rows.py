@@ -12,7 +12,7 @@ from ..params import ParameterError
 from ._kernel_types import CH_AY, CH_E1, CH_E2, CH_R, N_CHANNELS
 from .model import MeasurementModel, check_sensor_columns
 
-__all__ = ["sensor_rows", "fill_path_curvature", "CHANNELS"]
+__all__ = ["sensor_rows", "fill_path_curvature", "steering_roughness", "SMOOTH_STEERING_ROUGHNESS", "CHANNELS"]
 
 #: measurement channels in the order of the kernel's ``z`` columns
 CHANNELS = ("e1", "e2", "ay", "yaw_rate")
@@ -92,3 +92,37 @@ def sensor_rows(sensors: Mapping[str, ArrayLike], model: MeasurementModel) -> di
     if len(release) != n:
         raise ParameterError("sensor columns must have equal lengths")
     return {"t": t, "delta": delta, "vx": vx, "ax": ax, "kappa": np.ascontiguousarray(kappa), "z": z, "e1_release": release}
+
+
+#: :func:`steering_roughness` below which the logged steering is a smooth, well-sampled signal (the ramp between rows
+#: is its reconstruction, not one of two guesses): a staircase of independent steps gives sqrt(2), white sensor noise
+#: sqrt(3), a smooth signal of frequency ``f`` sampled every ``h`` about ``2 pi f h``.
+SMOOTH_STEERING_ROUGHNESS = 1.0
+
+
+def steering_roughness(t, delta) -> float:
+    """How far the logged steering is from the line between its neighbouring rows, per increment.
+
+    ``RMS(2 (delta_j - lin_j)) / RMS(delta_j - delta_{j-1})`` with ``lin_j`` the linear interpolation of
+    rows ``j - 1`` and ``j + 1`` at ``t_j`` (on uniform rows: ``RMS(second difference) / RMS(first
+    difference) = sqrt(2 (1 - r_1))``, ``r_1`` the lag-one autocorrelation of the increments). Measured:
+    0.12 on an independent generator's 1 kHz rows and 0.22-0.40 on its 100 Hz rows (a driver through an
+    80 ms steering actuator); 1.41 on every drive of the package's simulator, whose driver steps the
+    road-wheel angle at each camera frame (1 kHz rows, the same decimated to 100 Hz, and a 100 Hz
+    simulation); 1.62 on the real car's 100 Hz steering sensor (its noise). NaN with fewer than 3 rows
+    or a constant steering.
+    """
+    t = np.asarray(t, dtype=float)
+    d = np.asarray(delta, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(d)
+    t, d = t[ok], d[ok]
+    if len(d) < 3:
+        return float("nan")
+    span = t[2:] - t[:-2]
+    good = span > 0
+    w = np.where(good, (t[1:-1] - t[:-2]) / np.where(good, span, 1.0), 0.5)
+    lin = d[:-2] + w * (d[2:] - d[:-2])
+    dev = 2.0 * (d[1:-1] - lin)
+    inc = np.diff(d)
+    denom = float(np.sqrt(np.mean(inc**2)))
+    return float(np.sqrt(np.mean(dev**2)) / denom) if denom > 0 else float("nan")

@@ -26,7 +26,7 @@ from .box_step import _solve_step
 from .offline import OfflineFit, _continuation_rows, _gauss_newton, hold_fit
 from .passes import _pass
 
-__all__ = ["steering_roughness", "SMOOTH_STEERING_ROUGHNESS", "steering_hold_sensitivity", "yaw_dynamics_check", "steering_delay_check", "latency_sensitivity",
+__all__ = ["steering_hold_sensitivity", "yaw_dynamics_check", "steering_delay_check", "latency_sensitivity",
            "prefetch_window_baseline", "prefetch_window_refits", "process_noise_sensitivity"]
 
 #: The window and the refit of :func:`steering_hold_sensitivity` and :func:`yaw_dynamics_check` (their defaults):
@@ -221,40 +221,6 @@ def latency_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fit: Off
             "window_s": [float(t_w[0]), float(t_w[-1])],
             "method": "the weights' change per standard deviation of the latency (one Gauss-Newton step from the "
                       "window's fit at either end), added to the bands (delta method)"}  # fmt: skip
-
-
-#: :func:`steering_roughness` below which the logged steering is a smooth, well-sampled signal (the ramp between rows
-#: is its reconstruction, not one of two guesses): a staircase of independent steps gives sqrt(2), white sensor noise
-#: sqrt(3), a smooth signal of frequency ``f`` sampled every ``h`` about ``2 pi f h``.
-SMOOTH_STEERING_ROUGHNESS = 1.0
-
-
-def steering_roughness(t, delta) -> float:
-    """How far the logged steering is from the line between its neighbouring rows, per increment.
-
-    ``RMS(2 (delta_j - lin_j)) / RMS(delta_j - delta_{j-1})`` with ``lin_j`` the linear interpolation of
-    rows ``j - 1`` and ``j + 1`` at ``t_j`` (on uniform rows: ``RMS(second difference) / RMS(first
-    difference) = sqrt(2 (1 - r_1))``, ``r_1`` the lag-one autocorrelation of the increments). Measured:
-    0.12 on an independent generator's 1 kHz rows and 0.22-0.40 on its 100 Hz rows (a driver through an
-    80 ms steering actuator); 1.41 on every drive of the package's simulator, whose driver steps the
-    road-wheel angle at each camera frame (1 kHz rows, the same decimated to 100 Hz, and a 100 Hz
-    simulation); 1.62 on the real car's 100 Hz steering sensor (its noise). NaN with fewer than 3 rows
-    or a constant steering.
-    """
-    t = np.asarray(t, dtype=float)
-    d = np.asarray(delta, dtype=float)
-    ok = np.isfinite(t) & np.isfinite(d)
-    t, d = t[ok], d[ok]
-    if len(d) < 3:
-        return float("nan")
-    span = t[2:] - t[:-2]
-    good = span > 0
-    w = np.where(good, (t[1:-1] - t[:-2]) / np.where(good, span, 1.0), 0.5)
-    lin = d[:-2] + w * (d[2:] - d[:-2])
-    dev = 2.0 * (d[1:-1] - lin)
-    inc = np.diff(d)
-    denom = float(np.sqrt(np.mean(inc**2)))
-    return float(np.sqrt(np.mean(dev**2)) / denom) if denom > 0 else float("nan")
 
 
 def _other_hold(hold: str) -> str:
