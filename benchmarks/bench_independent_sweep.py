@@ -56,13 +56,6 @@ def _generator():
     return gen, sweep
 
 
-def _stats(values: list[float]) -> dict | None:
-    a = np.abs(np.asarray(values, dtype=float))
-    if not len(a):
-        return None
-    return {"median": float(np.median(a)), "p90": float(np.percentile(a, 90)), "worst": float(np.max(a)), "n": int(len(a))}
-
-
 def run_case(i: int, folder: Path) -> dict:
     """Make case ``i``, write and read it as a user's log, run the observer and the UKF, score."""
     from bench_generalization import ukf_camera_from_log
@@ -116,12 +109,14 @@ def run_case(i: int, folder: Path) -> dict:
 
 
 def summarise(records: list[dict], est: str) -> dict:
+    from bench_generalization import _stats
+
     errors, covered, verdicts, runtime = [], [], {}, []
     for r in records:
         e = r.get(est, {})
         if "stiffness_error_pct" not in e:
             continue
-        errors += [x for x in e["stiffness_error_pct"] if x is not None and math.isfinite(x)]
+        errors += [abs(x) for x in e["stiffness_error_pct"] if x is not None]
         covered += e["covered_2sigma"]
         runtime.append(e["runtime_s"])
         if "verdict" in e:

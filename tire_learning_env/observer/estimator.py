@@ -59,8 +59,9 @@ from .rows import SMOOTH_STEERING_ROUGHNESS, steering_roughness
 from .sensitivity import (latency_sensitivity, prefetch_window_refits, process_noise_sensitivity, steering_delay_check,
                           steering_hold_sensitivity, yaw_dynamics_check)
 
-#: The chi-square decrease by which a camera log's prediction-error cost must prefer the other steering hold to switch
-#: to it (a steering that steps between rows; :func:`.sensitivity.steering_hold_sensitivity`'s fast-rows threshold).
+#: The chi-square decrease by which a camera log's prediction-error cost must prefer one steering hold for it to be
+#: reported (the other's answer kept in the band; the value of :func:`.sensitivity.steering_hold_sensitivity`'s
+#: fast-rows threshold).
 CAMERA_HOLD_DECISIVE_CHI2 = 100.0
 
 # names this module imported before its split (still importable from here)
@@ -465,12 +466,9 @@ def _estimate_once(
         # a camera log whose rows lie between its frames: the midpoint of the two holds (a simulator's rows at its
         # step hold the steering; rows decimated from a faster drive ramp); rows that are the frames themselves
         # come from a drive faster than its frames, so the ramp is kept (sensitivity.steering_hold_sensitivity)
-        # -- unless the logged steering is smooth at the row rate (steering_roughness): then the line between the
-        # rows is the signal's reconstruction, not one of two guesses, and the ramp is reported (the hold's answer
-        # stays in the band). An independent generator's 100 Hz logs (a driver through an 80 ms actuator, roughness
-        # 0.22-0.40) read +1.2 to +2.8 % front, +2.1 to +5.5 % rear at the midpoint, -0.22 to +0.65 / -0.29 to
-        # +0.88 % ramped, +2.1 to +4.1 / +3.0 to +7.4 % held; every drive of the package's simulator steps the
-        # steering at its frames (roughness 1.41), where the midpoint stays
+        # -- unless the logged steering is smooth at the row rate (rows.steering_roughness, whose constant says what
+        # was measured): then the line between the rows is the signal's reconstruction, not one of two guesses, and
+        # the ramp is reported (the hold's answer stays in the band; README "Logs of another generator")
         roughness = steering_roughness(rows["t"], rows["delta"])
         smooth = bool(roughness < SMOOTH_STEERING_ROUGHNESS)
         midpoint = (model.name == "camera" and config.steering_hold is None and not smooth
@@ -549,7 +547,7 @@ def _estimate_once(
             **({"decisive_chi2": CAMERA_HOLD_DECISIVE_CHI2, "keep_term": True} if camera_decides else {}),
         )  # fmt: skip
         if hold_info.get("switch"):
-            kept = list(fit.hold_alternatives)  # preferred, not decisively (fast rows): the other's answer stays in
+            kept = list(fit.hold_alternatives)  # preferred, not decisively (fast rows, a camera): other's answer stays in
             obs.steering_hold = hold_info["other"]
             frac = fit.force_error / (0.5 * vehicle.m * 9.81)
             mismatch = getattr(fit, "mismatch_alternatives", [])

@@ -352,8 +352,8 @@ def steering_hold_sensitivity(observer: NeuroAdaptiveObserver, sensors: dict, fi
     info = {"other": other, "iterations": it, "window_s": [float(t_w[0]), float(t_w[-1])],
             "cost_decrease_under_other_chi2": decrease}  # fmt: skip
     decisive = fast_rows[1] if period < fast_rows[0] else decisive_chi2
-    if decide_by_cost:
-        info["decisive_chi2"] = float(decisive)
+    if decide_by_cost:  # the threshold that acts: dropping the other's answer, or (keep_term) preferring one
+        info["decisive_chi2"] = float(decisive_chi2 if keep_term else decisive)
     if decide_by_cost and not keep_term and abs(decrease) > decisive:
         fit.hold_alternatives = []
         info["sensitivity"] = "decided by the fit (the measurement answers the steering directly)"
