@@ -238,6 +238,7 @@ def test_a_latency_the_refined_profile_finds_near_the_first_is_used(bg):
     assert told["latency_told"] and all(abs(e) < 1.0 for e in told["stiffness_error_pct"])
 
 
+@pytest.mark.slow  # about 30 s
 def test_a_1khz_imu_preference_short_of_decisive_keeps_the_other_hold_in_the_band(bg):
     """The IMU family's scenario imu_white 9: a sampled continuous steering wheel at 1 kHz rows. The fit prefers the
     held steering by chi-square 13.7, above the 10 that decides at sparser rows but short of the 100 that rows closer
@@ -290,3 +291,28 @@ def test_scenarios_option_names_a_bad_item(bg, tmp_path):
     proc = subprocess.run([sys.executable, str(BENCH), "--scenarios", "imu_white:four", "--out", str(tmp_path / "g.json")],
                           capture_output=True, text=True, timeout=120)  # fmt: skip
     assert proc.returncode == 2 and "'imu_white:four'" in proc.stderr and not (tmp_path / "g.json").exists()
+
+
+def test_the_steering_census_tells_the_package_s_steps_from_a_noisy_sensor(tmp_path):
+    """``benchmarks/bench_steering_census.py`` on one drive of each camera family, one independent sweep case
+    and one seed of noisy-sensor variants: the package's drives step the steering at the frames (rough, half the
+    changes' power on under 2 % of the rows: the midpoint), the independent generator's steering is smooth, and
+    its noisy variants are rough by sensor noise (ramped). The full census (70 package drives, 12 sweep cases,
+    40 variants) is in the README."""
+    out = tmp_path / "census.json"
+    sys.path.insert(0, str(BENCH.parent))  # the census imports its sibling benchmarks as it runs
+    try:
+        import bench_steering_census
+
+        result = bench_steering_census.main(["--n", "1", "--highway", "0", "--sweep", "1", "--noisy-seeds", "1",
+                                             "--out", str(out), "--no-progress"])
+    finally:
+        sys.path.remove(str(BENCH.parent))
+    assert json.loads(out.read_text())["summary"] == result["summary"]
+    summary = result["summary"]
+    for family in FAMILIES:
+        assert summary[family]["midpoint"] == 1 and summary[family]["half_power_share_range"][1] < 0.02, summary
+    assert summary["independent_sweep"]["smooth"] == 1 and summary["independent_sweep"]["sensor_noise"] == 0
+    noisy = summary["independent_noisy_steering"]
+    assert noisy["drives"] == len(bench_steering_census.NOISY_VARIANTS) == noisy["sensor_noise"], noisy
+    assert noisy["roughness_range"][0] >= 0.7, noisy

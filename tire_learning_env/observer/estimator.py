@@ -55,7 +55,7 @@ from .offline import FORCE_ERROR_STAGES, hold_fit, refine
 from .prior_length import select_prior_length
 from .reexpression import lane_reexpressions, release_variance, shift_back
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
-from .rows import SMOOTH_STEERING_ROUGHNESS, steering_roughness
+from .rows import steering_character
 from .sensitivity import (latency_sensitivity, prefetch_window_refits, process_noise_sensitivity, steering_delay_check,
                           steering_hold_sensitivity, yaw_dynamics_check)
 
@@ -469,12 +469,12 @@ def _estimate_once(
         # -- unless the logged steering is smooth at the row rate (rows.steering_roughness, whose constant says what
         # was measured): then the line between the rows is the signal's reconstruction, not one of two guesses, and
         # the ramp is reported (the hold's answer stays in the band; README "Logs of another generator")
-        roughness = steering_roughness(rows["t"], rows["delta"])
-        smooth = bool(roughness < SMOOTH_STEERING_ROUGHNESS)
-        midpoint = (model.name == "camera" and config.steering_hold is None and not smooth
+        # -- or when its roughness is sensor noise on a continuous wheel (rows.steering_half_power_share: it
+        # changes at every row, where steps change at few)
+        character = steering_character(rows["t"], rows["delta"])
+        midpoint = (model.name == "camera" and config.steering_hold is None and not character["smooth"]
                     and float(np.mean(np.isfinite(rows["e1"]))) < 0.6)  # frames on fewer than 60 % of the rows
-        calibration["steering_hold"]["roughness"] = roughness
-        calibration["steering_hold"]["smooth"] = smooth
+        calibration["steering_hold"].update(character)
         # camera logs: at every row rate, 1 kHz rows included. There the two holds are half a millisecond apart,
         # and yet the answers 0.1-0.5 % (measured on two simulators that both hold the steering over their step:
         # the package's closed-loop drives, whose driver steps the steering at each frame's row in reaction to its

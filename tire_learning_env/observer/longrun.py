@@ -48,6 +48,9 @@ def newey_west_variance(u: NDArray, max_lag: int | None = None) -> NDArray:
 #: a bandwidth beyond them (rare: scores correlated over more than 1/4 of these lags) costs a second sweep.
 NW_KEPT_LAGS = 16384
 
+#: Elements of one block of FFTs (columns x transform length): a few tens of MB whatever the log length.
+NW_FFT_BLOCK_ELEMENTS = 2**22
+
 
 def _nw_fft_length(n: int, lags: int) -> int:
     """FFT length for the first ``lags`` autocovariances of ``n`` rows without wrap-around."""
@@ -58,7 +61,7 @@ def _nw_fft_length(n: int, lags: int) -> int:
 
 def nw_columns_per_fft(n: int) -> int:
     """Columns that :func:`newey_west_variance` transforms together on ``n`` rows (its memory block)."""
-    return max(1, int(2**22 // _nw_fft_length(n, n // 4 + 1)))
+    return max(1, int(NW_FFT_BLOCK_ELEMENTS // _nw_fft_length(n, n // 4 + 1)))
 
 
 def _newey_west_columns(columns, n: int, d: int, max_lag: int | None = None) -> NDArray:
@@ -82,7 +85,7 @@ def _newey_west_columns(columns, n: int, d: int, max_lag: int | None = None) -> 
     kept = min(keep_all, NW_KEPT_LAGS)
     nfft = _nw_fft_length(n, keep_all)
     workers = pass_threads()
-    step = max(1, int(2**22 // nfft))  # columns per FFT: a few tens of MB whatever the log length
+    step = max(1, int(NW_FFT_BLOCK_ELEMENTS // nfft))  # columns per FFT
     out = np.empty(d)
     acov = None if max_lag is not None else np.empty((kept, d))
     rho_sum = np.zeros(n_rho)
