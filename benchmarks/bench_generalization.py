@@ -429,18 +429,20 @@ def ukf_camera_from_log(sensors: dict):
     return cam, {"rate_hz": rate, "e1_std_m": float(s1), "e2_std_rad": float(s2), "source": "estimated from the log"}
 
 
+def camera_drive_builders(sc: dict) -> tuple:
+    """``(build_fn, summary_fn)`` of :func:`_build_with_redraws` for a camera or highway-env scenario ``sc``."""
+    if sc["family"] in HIGHWAY_FAMILIES:  # a highway-env scene (the scenario's own draw: redraws read it from b)
+        return (lambda s: build_highway(s, _vehicle)), (lambda b: highway_truth_summary(b[0], b[1], sc, truth_summary))
+    return build, (lambda b: truth_summary(b[0], b[1], sc))
+
+
 def run_scenario(sc: dict) -> dict:
     """Simulate, run both estimators, score. Never raises: errors are recorded."""
     from tire_learning_env.metrics import compute_metrics
 
     out: dict = {"scenario": sc}
     t0 = time.perf_counter()
-    if sc["family"] in HIGHWAY_FAMILIES:  # a highway-env scene (the scenario's own draw: redraws read it from b)
-        builder = lambda s: build_highway(s, _vehicle)  # noqa: E731
-        summary = lambda b: highway_truth_summary(b[0], b[1], sc, truth_summary)  # noqa: E731
-    else:
-        builder, summary = build, (lambda b: truth_summary(b[0], b[1], sc))
-    sc, built, ts, rejected = _build_with_redraws(sc, builder, summary, record_error=out)
+    sc, built, ts, rejected = _build_with_redraws(sc, *camera_drive_builders(sc), record_error=out)
     if built is None:  # the build raised: recorded in out
         return out
     log, plant, truth_vehicle, nominal, true_curve, k_true = built

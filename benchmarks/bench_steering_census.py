@@ -36,11 +36,11 @@ RESULTS = Path(__file__).resolve().parent / "results" / "steering_census.json"
 
 def census_row(t, delta, e1) -> dict:
     """The rule's inputs and verdict on one log's rows."""
-    from tire_learning_env.observer.rows import steering_character
+    from tire_learning_env.observer.rows import MIDPOINT_FRAME_SHARE, steering_character
 
     out = steering_character(np.asarray(t, float), np.asarray(delta, float))
     out["frame_share"] = float(np.mean(np.isfinite(np.asarray(e1, float))))
-    out["midpoint"] = bool(not out["smooth"] and out["frame_share"] < 0.6)
+    out["midpoint"] = bool(not out["smooth"] and out["frame_share"] < MIDPOINT_FRAME_SHARE)
     return out
 
 
@@ -52,12 +52,7 @@ def package_drives(n: int, seed: int, highway: int, progress) -> list[dict]:
     plan = [(f, i) for f in bg.FAMILIES for i in range(n)] + [(bg.HIGHWAY, i) for i in range(highway)]
     for family, i in progress(plan, desc="package drives"):
         sc = bg.sample_scenario(family, i, seed, False)
-        if family in bg.HIGHWAY_FAMILIES:
-            builder = lambda s: bg.build_highway(s, bg._vehicle)  # noqa: E731
-            summary = lambda b, s=sc: bg.highway_truth_summary(b[0], b[1], s, bg.truth_summary)  # noqa: E731
-        else:
-            builder, summary = bg.build, (lambda b, s=sc: bg.truth_summary(b[0], b[1], s))
-        _, built, _, _ = bg._build_with_redraws(sc, builder, summary)
+        _, built, _, _ = bg._build_with_redraws(sc, *bg.camera_drive_builders(sc))
         s = built[0].sensors
         rows.append({"source": family, "index": i, **census_row(s["t"], s["delta"], s["e1"])})
     return rows

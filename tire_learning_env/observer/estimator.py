@@ -55,7 +55,7 @@ from .offline import FORCE_ERROR_STAGES, hold_fit, refine
 from .prior_length import select_prior_length
 from .reexpression import lane_reexpressions, release_variance, shift_back
 from .result import AXLES, EstimationResult  # noqa: F401  (AXLES: re-exported)
-from .rows import steering_character
+from .rows import MIDPOINT_FRAME_SHARE, steering_character
 from .sensitivity import (latency_sensitivity, prefetch_window_refits, process_noise_sensitivity, steering_delay_check,
                           steering_hold_sensitivity, yaw_dynamics_check)
 
@@ -473,7 +473,7 @@ def _estimate_once(
         # changes at every row, where steps change at few)
         character = steering_character(rows["t"], rows["delta"])
         midpoint = (model.name == "camera" and config.steering_hold is None and not character["smooth"]
-                    and float(np.mean(np.isfinite(rows["e1"]))) < 0.6)  # frames on fewer than 60 % of the rows
+                    and float(np.mean(np.isfinite(rows["e1"]))) < MIDPOINT_FRAME_SHARE)
         calibration["steering_hold"].update(character)
         # camera logs: at every row rate, 1 kHz rows included. There the two holds are half a millisecond apart,
         # and yet the answers 0.1-0.5 % (measured on two simulators that both hold the steering over their step:

@@ -13,7 +13,7 @@ from ._kernel_types import CH_AY, CH_E1, CH_E2, CH_R, N_CHANNELS
 from .model import MeasurementModel, check_sensor_columns
 
 __all__ = ["sensor_rows", "fill_path_curvature", "steering_roughness", "SMOOTH_STEERING_ROUGHNESS", "steering_half_power_share",
-           "CONTINUOUS_STEERING_HALF_POWER_SHARE", "steering_character", "CHANNELS"]
+           "CONTINUOUS_STEERING_HALF_POWER_SHARE", "steering_character", "MIDPOINT_FRAME_SHARE", "CHANNELS"]
 
 #: measurement channels in the order of the kernel's ``z`` columns
 CHANNELS = ("e1", "e2", "ay", "yaw_rate")
@@ -159,6 +159,11 @@ def steering_half_power_share(delta) -> float:
         return float("nan")
     cumulative = np.cumsum(power)
     return float(np.searchsorted(cumulative, 0.5 * cumulative[-1]) + 1) / len(power)
+
+
+#: camera frames on fewer than this share of the rows: a camera log whose steering steps between frames is
+#: answered at the midpoint of the two holds (the estimator's rule; :func:`steering_character` says when it steps)
+MIDPOINT_FRAME_SHARE = 0.6
 
 
 def steering_character(t, delta) -> dict:
