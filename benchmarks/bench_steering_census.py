@@ -23,7 +23,8 @@ true tire stiffness, on the noisy-steering logs of :data:`ESTIMATE_CASES` (the R
 generator" figures), each twice: with the rule as it is, and with the sensor-noise test switched off
 (``before``: the rule before it, which reports rough steering at the midpoint of the two holds). Per case the
 stiffness error against the truth [%], the two-sigma band [% of the truth], whether the truth is inside it, the
-verdict and the hold reported (about 5 minutes more; ``estimates`` in the JSON).
+verdict and the steering reported between rows (``ramp``, ``hold`` or ``midpoint``; about 2 minutes more;
+``estimates`` in the JSON).
 """
 
 from __future__ import annotations
