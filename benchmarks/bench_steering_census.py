@@ -99,12 +99,15 @@ def independent_drives(sweep_cases: int, noisy_seeds: int, progress) -> list[dic
     return rows
 
 
-def estimate_case(seed: int, noise_deg: float, step_deg: float, sensors: str) -> dict:
-    """One :data:`ESTIMATE_CASES` entry estimated with the rule as it is (``now``) and without its sensor-noise
-    test (``before``)."""
-    import tire_learning_env.observer.rows as rows_module
+def sedan_log(seed: int, sensors: str = "camera", noise_deg: float = 0.0, step_deg: float = 0.0):
+    """The independent generator's sedan, 60 s, seed ``seed``: ``(log, k_true, vehicle)``.
+
+    ``log`` holds the rows a user would bring for ``sensors`` (``camera``: ``e1``/``e2``; ``imu``: yaw rate and
+    accelerations; ``both``), with the steering seen through :func:`noisy_steering` when ``noise_deg`` or
+    ``step_deg`` is set; ``k_true`` the true tire stiffness per axle [N/rad]; ``vehicle`` the vehicle file,
+    8 % (front) and -6 % (rear) off it.
+    """
     from bench_independent_sweep import _generator
-    from tire_learning_env.observer import ObserverConfig, estimate
     from tire_learning_env.params import VehicleParams
 
     gen, _ = _generator()
@@ -112,9 +115,20 @@ def estimate_case(seed: int, noise_deg: float, step_deg: float, sensors: str) ->
     car = gen.VEHICLES["sedan"]
     keys = {"camera": ("e1", "e2"), "imu": ("yaw_rate", "ay", "ax"), "both": ("e1", "e2", "yaw_rate", "ay", "ax")}[sensors]
     log = {k: np.asarray(out[k], dtype=float) for k in ("t", "vx", "delta", "kappa") + keys}
-    log["delta"] = noisy_steering(log["delta"], seed, noise_deg, step_deg)
+    if noise_deg or step_deg:
+        log["delta"] = noisy_steering(log["delta"], seed, noise_deg, step_deg)
     k_true = np.array([truth["Cf_tire"], truth["Cr_tire"]])
     vehicle = VehicleParams(m=car["m"], Iz=car["Iz"], lf=car["lf"], lr=car["lr"], Cf=1.08 * k_true[0], Cr=0.94 * k_true[1])
+    return log, k_true, vehicle
+
+
+def estimate_case(seed: int, noise_deg: float, step_deg: float, sensors: str) -> dict:
+    """One :data:`ESTIMATE_CASES` entry estimated with the rule as it is (``now``) and without its sensor-noise
+    test (``before``)."""
+    import tire_learning_env.observer.rows as rows_module
+    from tire_learning_env.observer import ObserverConfig, estimate
+
+    log, k_true, vehicle = sedan_log(seed, sensors, noise_deg, step_deg)
     row = {"seed": seed, "noise_deg": noise_deg, "quantiser_deg": step_deg, "sensors": sensors}
     original = rows_module.CONTINUOUS_STEERING_HALF_POWER_SHARE
     for name, share in (("now", original), ("before", np.inf)):
