@@ -17,6 +17,9 @@ def test_simulate_then_estimate_a_camera_log(tmp_path, capsys):
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["lmi"]["certified"]
     assert metrics["ground_truth"]["tire_curve_nrmse"]["front"] < 0.02
+    # the package's own single-track truth: no model error, so no evidence and no warning on the line
+    assert metrics["summary"]["model_error_detected"] is False and metrics["summary"]["model_error_evidence"] is None
+    assert "MODEL ERROR" not in capsys.readouterr().out
     header = (out / "estimates.csv").read_text().splitlines()[0]
     assert header.startswith("t,e1_hat,e1_dot_hat,e2_hat,e2_dot_hat,alpha_f_hat,alpha_r_hat,Fyf_hat,Fyr_hat")
     assert (out / "tire_curves.png").stat().st_size > 1000

@@ -750,6 +750,13 @@ def test_a_model_error_is_flagged_when_the_innovations_turn_correlated_with_the_
     assert res.summary()["model_error_detected"] is True
     assert any(s["fit"] == "whole log (model-error sensitivity)" for s in stages)
     assert len(res.fit.mismatch_alternatives) == 1
+    # the user is told why, in metrics.json and on the command's line
+    from tire_learning_env.commands.estimate import _stiffness_text
+
+    ev = res.summary()["model_error_evidence"]
+    assert ev["correlated_at_force_error_N"] == tested[turn]["force_error_N"] < ev["chosen_force_error_N"], ev
+    assert max(ev["ljung_box_q_e1_e2"]) > ev["ljung_box_bound"] and ev["nis_per_dof_there"] > 1.3, ev
+    assert "MODEL ERROR" in _stiffness_text(res.summary())
 
 
 def test_stiffness_readout_keeps_the_range_of_a_drive_that_turned_one_way():

@@ -181,7 +181,12 @@ def _stiffness_text(summary: dict) -> str:
             out.append(f"{a} not identifiable")
         else:
             out.append(f"{a} {k:.0f} N/rad (+/-{0.5 * (band[1] - band[0]):.0f}, 2 sigma)")
-    return "stiffness per tire " + ", ".join(out)
+    text = "stiffness per tire " + ", ".join(out)
+    if summary.get("model_error_detected"):
+        text += ("; MODEL ERROR detected (the camera innovations turned correlated as the process noise fell: "
+                 "dynamics the single-track model lacks, such as tire relaxation or roll); the value may differ "
+                 "from the steady-state stiffness by more than its band (metrics.json: summary.model_error_evidence)")
+    return text
 
 
 def _run_camera(log: DrivingLog, vehicle, config, args, why: str) -> int:

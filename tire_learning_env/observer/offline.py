@@ -374,7 +374,7 @@ def refine(
         if not tested:
             return None
         test = innovation_whiteness(acc.innov)
-        stage["ljung_box_q"], stage["white"] = test["q"], test["white"]
+        stage["ljung_box_q"], stage["ljung_box_bound"], stage["white"] = test["q"], test["bound"], test["white"]
         return test["white"]
 
     # continuation: the intermediate stages, cheaply (window, few passes); with ``whiteness`` the descent

@@ -208,6 +208,36 @@ class EstimationResult:
             out[a] = [math.degrees(grid[l]), math.degrees(grid[h])]
         return out
 
+    def model_error_evidence(self) -> dict | None:
+        """Why the model error was reported (``None`` when it was not).
+
+        The offline fit lowers the process noise stage by stage; the camera innovations, white at
+        the stage it stopped at, turned correlated at the next one (Ljung-Box over 5 frame lags):
+        the vehicle has dynamics the single-track model lacks (tire relaxation, roll, load transfer,
+        a camera or steering effect). The stage, its force error [N], its NIS per degree of freedom
+        and the test's statistics are returned; the band already holds the answer's change between
+        the two stages.
+        """
+        fit = self.fit
+        if fit is None or not getattr(fit, "mismatch_alternatives", None):
+            return None
+        stages = (getattr(fit, "force_error_calibration", None) or {}).get("stages", [])
+        tested = [s for s in stages if s.get("white") is False]
+        if not tested:
+            return {"test": "camera innovations' whiteness (Ljung-Box, 5 frame lags)"}
+        turned = tested[-1]  # the descent stops at the turn: the last stage whose innovations were correlated
+        return {
+            "test": "camera innovations' whiteness (Ljung-Box, 5 frame lags), white at the chosen process noise",
+            "chosen_force_error_N": float(fit.force_error),
+            "correlated_at_force_error_N": float(turned["force_error_N"]),
+            "ljung_box_q_e1_e2": [float(q) for q in turned.get("ljung_box_q", [])],
+            "ljung_box_bound": float(turned.get("ljung_box_bound", float("nan"))),
+            "nis_per_dof_there": float(turned["nis_per_dof"]),
+            "meaning": ("the vehicle has dynamics the single-track model lacks (e.g. tire relaxation, roll, load "
+                        "transfer); the stiffness is that of the single-track model that fits this drive best and "
+                        "may differ from the steady-state cornering stiffness by more than its band"),
+        }
+
     def summary(self) -> dict:
         """Headline figures (the ``summary`` block of ``metrics.json``)."""
         rep = self.stiffness_report()
@@ -221,6 +251,7 @@ class EstimationResult:
             "stiffness_rear_2sigma_N_per_rad": rep["rear"]["band_2sigma_N_per_rad"],
             # the offline fit's innovations turned correlated as the process noise fell: dynamics the model lacks
             "model_error_detected": None if self.fit is None else bool(getattr(self.fit, "mismatch_alternatives", None)),
+            "model_error_evidence": self.model_error_evidence(),
             "health_final": self.online.final_health,
             "health_ok_fraction": self.online.health_fraction["ok"],
             "runtime_s": float(self.runtime_s.get("total", float("nan"))),
