@@ -551,8 +551,10 @@ def _estimate_once(
             obs.steering_hold = hold_info["other"]
             frac = fit.force_error / (0.5 * vehicle.m * 9.81)
             mismatch = getattr(fit, "mismatch_alternatives", [])
+            turn = fit.force_error_calibration.get("model_error_stage")
             fit = refine(obs, rows, fit.weights, prior_cov=obs.prior_covariance(offline=True), force_errors=(frac,))
             fit.mismatch_alternatives = mismatch  # a single stage here: the descent's model-error finding stands
+            fit.force_error_calibration["model_error_stage"] = turn
             fit, calibration["prior_length"] = select_prior_length(obs, rows, fit, choose=False)
             fit.hold_alternatives = kept
             hold_info = dict(hold_info, other=calibration["steering_hold"]["used"], refitted=True)

@@ -384,12 +384,13 @@ def refine(
     j = n_st - 1  # the stage to fit on the whole log
     seen_white = False
     coloured = None  # the first stage whose innovations turned correlated after white ones: the model's own error
+    turn = None  # that stage's record (the evidence the result reports)
     for i in range(n_st - 1):
         w_fit, nis, white = fit_stage(i, w, sub, sub_from, continuation_iter, 100.0 * min_decrease, "continuation")
         if i > 0 and (nis > nis_limit or (seen_white and white is False)):
             j = i - 1  # the model error is larger than this stage's process noise
-            if seen_white and white is False:  # the turn to correlated innovations: the model's own error,
-                coloured = i  # whatever the NIS says (a NIS just over its limit once hid it: multi-body drive 2)
+            if seen_white and white is False:  # the turn to correlated innovations: the model's own error, whatever
+                coloured, turn = i, stages[-1]  # the NIS says (a NIS just over its limit once hid it: multi-body 2)
             break
         cheap_w.append(w_fit)
         w = w_fit
@@ -401,7 +402,7 @@ def refine(
         observer.set_force_error(force_errors[j] * load)
         acc_last, _ = _pass(observer, sub, w, sub_from, gate, innovations=True)
         if not record(force_errors[j] * load, acc_last, 0, "continuation (test only)", True):
-            coloured = j
+            coloured, turn = j, stages[-1]
             j -= 1
             w = cheap_w[j]
     # the stage reached, on the whole log; its neighbours too when the whole log disagrees
@@ -433,7 +434,8 @@ def refine(
         fit = _final_fit(obs, sensors, w, Lam, fit_from, gate, all_costs, iters)
         fit.force_error = fe
         fit.mismatch_alternatives = mismatch
-        fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe}
+        fit.force_error_calibration = {"stages": stages, "chosen_force_error_N": fe,
+                                       "model_error_stage": turn if mismatch else None}
         return fit
 
     if not background_final:

@@ -221,17 +221,16 @@ class EstimationResult:
         fit = self.fit
         if fit is None or not getattr(fit, "mismatch_alternatives", None):
             return None
-        stages = (getattr(fit, "force_error_calibration", None) or {}).get("stages", [])
-        tested = [s for s in stages if s.get("white") is False]
-        if not tested:
-            return {"test": "camera innovations' whiteness (Ljung-Box, 5 frame lags)"}
-        turned = tested[-1]  # the descent stops at the turn: the last stage whose innovations were correlated
+        turned = (getattr(fit, "force_error_calibration", None) or {}).get("model_error_stage")
+        test = "camera innovations' whiteness (Ljung-Box, 5 frame lags), white at the chosen process noise"
+        if turned is None:  # a fit made without the descent's records
+            return {"test": test}
         return {
-            "test": "camera innovations' whiteness (Ljung-Box, 5 frame lags), white at the chosen process noise",
+            "test": test,
             "chosen_force_error_N": float(fit.force_error),
             "correlated_at_force_error_N": float(turned["force_error_N"]),
-            "ljung_box_q_e1_e2": [float(q) for q in turned.get("ljung_box_q", [])],
-            "ljung_box_bound": float(turned.get("ljung_box_bound", float("nan"))),
+            "ljung_box_q_e1_e2": [float(q) for q in turned["ljung_box_q"]],
+            "ljung_box_bound": float(turned["ljung_box_bound"]),
             "nis_per_dof_there": float(turned["nis_per_dof"]),
             "meaning": ("the vehicle has dynamics the single-track model lacks (e.g. tire relaxation, roll, load "
                         "transfer); the stiffness is that of the single-track model that fits this drive best and "
