@@ -132,32 +132,40 @@ def ukf_predict(x, P, q, dt, delta, vx, ax, pdd, pddd, k, wm, wc, gamma, sig, wo
 
 
 @njit(cache=True)
-def ukf_update(x, P, z1, z2, r1, r2):
+def ukf_update(x, P, z1, z2, r1, r2, xc=0.0):
     """Kalman update with the camera frame ``z = [e1, e2]`` (variances ``r1``, ``r2``), in place.
 
+    ``e1`` is measured ``xc`` [m] ahead of the CG (``VehicleParams.camera_x``; the path's bend
+    over ``xc`` already taken off ``z1``): ``h = [e1 + xc sin(e2), e2]``, linearised at the
+    state (``H = [[1, 0, xc cos(e2), 0, ...], [0, 0, 1, 0, ...]]``); ``xc = 0`` is the
+    selection of ``e1`` and ``e2``.
     Returns ``(nu_e1, nu_e2, nis)``: the innovation before the correction and its normalised
     square ``nu^T S^-1 nu`` (``S`` the innovation covariance).
     """
     n = N_X
-    s11 = P[X_E1, X_E1] + r1
-    s12 = P[X_E1, X_E2]
-    s22 = P[X_E2, X_E2] + r2
+    c = xc * math.cos(x[X_E2])
+    ph0 = np.empty(n)  # P H0^T
+    ph1 = np.empty(n)  # P H1^T
+    for i in range(n):
+        ph0[i] = P[i, X_E1] + c * P[i, X_E2]
+        ph1[i] = P[i, X_E2]
+    s11 = ph0[X_E1] + c * ph0[X_E2] + r1
+    s12 = ph1[X_E1] + c * ph1[X_E2]
+    s22 = ph1[X_E2] + r2
     det = s11 * s22 - s12 * s12
     i11, i12, i22 = s22 / det, -s12 / det, s11 / det
-    y1, y2 = z1 - x[X_E1], z2 - x[X_E2]
+    y1, y2 = z1 - (x[X_E1] + xc * math.sin(x[X_E2])), z2 - x[X_E2]
     nis = y1 * (i11 * y1 + i12 * y2) + y2 * (i12 * y1 + i22 * y2)
     Kg = np.empty((n, 2))
     for i in range(n):
-        Kg[i, 0] = P[i, X_E1] * i11 + P[i, X_E2] * i12
-        Kg[i, 1] = P[i, X_E1] * i12 + P[i, X_E2] * i22
+        Kg[i, 0] = ph0[i] * i11 + ph1[i] * i12
+        Kg[i, 1] = ph0[i] * i12 + ph1[i] * i22
     for i in range(n):
         x[i] += Kg[i, 0] * y1 + Kg[i, 1] * y2
-    # P <- P - K S K^T = P - K [P(0,:); P(2,:)]
-    row0 = P[X_E1].copy()
-    row2 = P[X_E2].copy()
+    # P <- P - K S K^T = P - K (P H^T)^T
     for i in range(n):
         for j in range(n):
-            P[i, j] -= Kg[i, 0] * row0[j] + Kg[i, 1] * row2[j]
+            P[i, j] -= Kg[i, 0] * ph0[j] + Kg[i, 1] * ph1[j]
     for i in range(n):
         for j in range(i + 1, n):
             v = 0.5 * (P[i, j] + P[j, i])
@@ -172,7 +180,7 @@ U_DELTA, U_VX, U_AX, U_PDD, U_PDDD = range(5)
 
 @njit(cache=True)
 def ukf_run_rows(x, P, q, r1, r2, t, delta, vx, ax, pdd, pddd, e1, e2, k, wm, wc, gamma, u_prev, t_now, dt_last,
-                 predict_last, out_x, out_pd, out_c12, out_aux, out_nu, out_nis):  # fmt: skip
+                 predict_last, out_x, out_pd, out_c12, out_aux, out_nu, out_nis, xc=0.0):  # fmt: skip
     """Filter rows ``t_j`` (any spacing) from the filter's time ``t_now``, as every estimator's ``run``.
 
     Per row: predict from ``t_now`` to ``t_j`` with the previous row's inputs held (before the
@@ -198,7 +206,7 @@ def ukf_run_rows(x, P, q, r1, r2, t, delta, vx, ax, pdd, pddd, e1, e2, k, wm, wc
                         u_prev[U_PDDD], k, wm, wc, gamma, sig, work, L)  # fmt: skip
         t_now = t[j]
         if e1[j] == e1[j] and e2[j] == e2[j]:
-            y1, y2, nis = ukf_update(x, P, e1[j], e2[j], r1, r2)
+            y1, y2, nis = ukf_update(x, P, e1[j], e2[j], r1, r2, xc)
             out_nu[j, 0] = y1
             out_nu[j, 1] = y2
             out_nis[j] = nis

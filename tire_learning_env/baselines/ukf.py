@@ -328,7 +328,10 @@ class JointUKF:
                 raise ParameterError(f"z must hold (e1, e2) or (e1, e2, a_y, r), got {zz.size} values")
             z1, z2 = zz[CH_E1], zz[CH_E2]
         if math.isfinite(z1) and math.isfinite(z2):
-            ukf_update(self.x_, self.P_, z1, z2, self.measurement_std[0] ** 2, self.measurement_std[1] ** 2)
+            xc = float(self.vehicle.camera_x)
+            if xc:  # the path's bend over camera_x, at the curvature of the last predict (psi_dot_des / vx)
+                z1 += 0.5 * self._u[U_PDD] / self._u[U_VX] * xc * xc
+            ukf_update(self.x_, self.P_, z1, z2, self.measurement_std[0] ** 2, self.measurement_std[1] ** 2, xc)
         self._u[U_DELTA] = float(delta)
         self._u[U_VX] = self.vehicle.vx if vx is None else float(vx)
         self._started = True
@@ -386,6 +389,9 @@ class JointUKF:
             if self._started and self._path is not None and t[0] > self._path[0]:  # across calls, as in one
                 kappa_rate[0] = (kappa[0] - self._path[1]) / (t[0] - self._path[0])
             pdd, pddd = vx * kappa, ax * kappa + vx * kappa_rate
+        xc = float(self.vehicle.camera_x)
+        if xc:  # e1 measured camera_x ahead of the CG: the path's bend over camera_x back onto it (ukf_update)
+            e1 = e1 + 0.5 * kappa * xc * xc
         t0 = time.perf_counter()
         out_x, out_pd, out_c12, aux = np.empty((n, N_X)), np.empty((n, N_X)), np.empty(n), np.empty((n, 4))
         out_nu, out_nis = np.full((n, 2), np.nan), np.full(n, np.nan)
@@ -394,7 +400,7 @@ class JointUKF:
         done, t_end = ukf_run_rows(
             self.x_, self.P_, self._q, self.measurement_std[0] ** 2, self.measurement_std[1] ** 2, t, delta, vx, ax,
             pdd, pddd, e1, e2, self._k, self._wm, self._wc, self._gamma, self._u, t_now, dt_last, bool(predict_last),
-            out_x, out_pd, out_c12, aux, out_nu, out_nis,
+            out_x, out_pd, out_c12, aux, out_nu, out_nis, xc,
         )  # fmt: skip
         if done < n:
             raise FloatingPointError(f"UKF estimate became non-finite at t={t[done]:.4f} s: {dict(zip(STATE_NAMES, out_x[done]))}")

@@ -42,7 +42,7 @@ V_FLOOR = 3.0  # [m/s]: speed floor of the slip angles (singular at standstill)
 class Model(NamedTuple):
     """Vehicle and basis constants of a run (all SI)."""
 
-    veh: np.ndarray  # [m, Iz, lf, lr, 2 Cf, 2 Cr]
+    veh: np.ndarray  # [m, Iz, lf, lr, 2 Cf, 2 Cr, camera_x]
     lo: np.ndarray  # (2, N) soft-clip lower bounds [rad]
     hi: np.ndarray  # (2, N) upper bounds [rad]
     off: np.ndarray  # (2, N) offsets subtracted from the activations [rad]

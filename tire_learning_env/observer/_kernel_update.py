@@ -49,9 +49,13 @@ def _measurement(group, st, delta, vx, M, S, zk, wk):
     wk.Dw[:, :] = 0.0
     x = st.x
     if group == GROUP_CAMERA:
-        h0 = x[E1]
+        # e1 measured camera_x ahead of the CG (VehicleParams.camera_x; the path's bend over camera_x is taken off
+        # the logged e1 before the passes, estimator.estimate): e1 + camera_x sin(e2)
+        xc = M.veh[6]
+        h0 = x[E1] + xc * math.sin(x[E2])
         h1 = x[E2]
         wk.H[0, E1] = 1.0
+        wk.H[0, E2] = xc * math.cos(x[E2])
         wk.H[1, E2] = 1.0
     else:
         m, lf, lr = M.veh[0], M.veh[2], M.veh[3]

@@ -393,6 +393,11 @@ def _estimate_once(
         raise ParameterError("time must be strictly increasing")
     rows = {"t": t, "delta": rows_k["delta"], "vx": rows_k["vx"], "ax": rows_k["ax"], "kappa": rows_k["kappa"]}
     rows.update(e1=rows_k["z"][:, 0], e2=rows_k["z"][:, 1], ay=rows_k["z"][:, 2], yaw_rate=rows_k["z"][:, 3])
+    if model.uses_camera and vehicle.camera_x:
+        # a camera camera_x ahead of the CG sees e1 + camera_x sin(e2) - kappa camera_x^2 / 2: the passes measure the
+        # first two terms (_kernel_update._measurement); the path's own bend over camera_x (kappa is known) goes back
+        # onto the logged e1 here
+        rows["e1"] = rows["e1"] + 0.5 * np.nan_to_num(rows["kappa"]) * vehicle.camera_x**2
     reexpressed = None
     if model.uses_camera and config.lane_reexpressions:  # a lane change steps e1 by a lane width: a shift, not motion
         rows["e1"], reexpressed = lane_reexpressions(t, rows["e1"], rows["e2"], rows["vx"])

@@ -221,11 +221,11 @@ def _vertices(vehicle, model: MeasurementModel, group: str, T: float, imu_T: flo
                 cov = M @ Ah @ cov @ Ah.T @ M.T + Li @ np.diag(noise[2:] ** 2) @ Li.T
             lam, vec = np.linalg.eigh(0.5 * (cov + cov.T))
             W = vec * np.sqrt(np.maximum(lam, 0.0))  # W W^T = cov
-            C = model.camera_output()
+            C = model.camera_output(vehicle.camera_x)
             D = np.zeros((2, 2))
         else:
             Ad, Bd = _zoh(A, F, T)
-            C = model.camera_output()
+            C = model.camera_output(vehicle.camera_x)
             D = np.zeros((2, 2))
         out.append(_Vertex(Ad, Bd, W, C, D, Hs, (k_f, k_r, v)))
     return out
@@ -523,6 +523,8 @@ def synthesize_gains(
         "slope_box": box.tolist(),
         "design": design.to_dict(),
     }
+    if vehicle.camera_x:  # a camera ahead of the CG changes C (a key only then: the caches of every other design stay)
+        settings["camera_x"] = float(vehicle.camera_x)
     cache_root = None
     if cache:
         cache_root = default_cache_dir() if cache is True else Path(cache)

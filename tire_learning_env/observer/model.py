@@ -99,10 +99,12 @@ class MeasurementModel:
     def state_names(self) -> tuple[str, ...]:
         return STATE_NAMES[: self.nx]
 
-    def camera_output(self) -> NDArray:
-        """``C`` (2, nx) of the camera channels ``[e1, e2]``."""
+    def camera_output(self, camera_x: float = 0.0) -> NDArray:
+        """``C`` (2, nx) of the camera channels ``[e1, e2]`` linearised at ``e2 = 0``: ``e1`` measured
+        ``camera_x`` [m] ahead of the CG is ``e1 + camera_x sin(e2)`` (:attr:`.VehicleParams.camera_x`)."""
         C = np.zeros((2, self.nx))
         C[0, StateIndex.E1] = 1.0
+        C[0, StateIndex.E2] = float(camera_x)
         C[1, StateIndex.E2] = 1.0
         return C
 

@@ -192,7 +192,7 @@ class NeuroAdaptiveObserver(BlockLaw):
         wlo, whi = self._weight_box()
         q = self.force_error**2 * self.force_error_period
         return K.Model(
-            np.array([v.m, v.Iz, v.lf, v.lr, 2.0 * v.Cf, 2.0 * v.Cr]), np.ascontiguousarray(b.lower),
+            np.array([v.m, v.Iz, v.lf, v.lr, 2.0 * v.Cf, 2.0 * v.Cr, v.camera_x]), np.ascontiguousarray(b.lower),
             np.ascontiguousarray(b.upper), np.ascontiguousarray(b.offset), float(b.sharpness), np.ascontiguousarray(b.scale),
             int(self.n_bias), np.ascontiguousarray(wlo), np.ascontiguousarray(whi), int(self.model.nx), np.array([q, q]),
             float(self.h_max), *self._bounds,
