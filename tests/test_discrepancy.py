@@ -426,3 +426,13 @@ def test_config_rejects_unknown_keys():
     with pytest.raises(ParameterError):
         DiscrepancyConfig(alpha=2.0)
     assert math.isclose(DiscrepancyConfig().window, 3.0)
+
+
+def test_a_camera_ahead_of_the_cg_is_refused_by_name_not_reported_as_an_effect(tmp_path):
+    """The workflow's model reads e1 at the CG. A vehicle file whose camera sits ahead (camera_x, which the estimate
+    command takes) is refused naming it; analysed as the CG's, the position would come out as a missing effect."""
+    from tire_learning_env.params import ParameterError, VehicleParams
+
+    log = _log(tmp_path, {}, duration=20.0)
+    with pytest.raises(ParameterError, match=r"camera_x.*\+1\.5 m|\+1\.5 m.*camera_x"):
+        analyze(log, vehicle=VehicleParams(camera_x=1.5), progress=False)
