@@ -1000,6 +1000,8 @@ def test_a_camera_ahead_of_the_cg_is_estimated_where_the_vehicle_file_puts_it():
     assert told.calibration["vehicle"]["camera_x"] == 1.5
     untold = estimate(sensors, file, config=ObserverConfig(sensors="camera"))
     assert untold.verdict == "not_identifiable"  # the wrong measurement model is not read as a confident number
+    delay = untold.calibration["steering_delay"]  # what rejects it, and the hint it gives
+    assert delay["verdict"] == "rejected" and "camera_x" in delay["meaning"]
 
 
 def test_the_camera_position_enters_the_measurement_model_and_the_gain_design():

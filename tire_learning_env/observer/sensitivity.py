@@ -531,7 +531,9 @@ def steering_delay_check(observer: NeuroAdaptiveObserver, sensors: dict, fit: Of
         info["preferred_delay_s"] = preferred
         info["meaning"] = (f"the log's response follows the steering about {1e3 * preferred:.0f} ms late: tire "
                            "relaxation, steering compliance or an actuator lag the single-track model lacks (or a "
-                           "steering column logged early); the bands add the stiffness's change under that lag")  # fmt: skip
+                           "steering column logged early, or a lane camera whose e1 is measured ahead of the CG where "
+                           "the vehicle file's camera_x does not put it: 1.5 m ahead read as the CG's is rejected so, "
+                           "at 17 ms); the bands add the stiffness's change under that lag")  # fmt: skip
     return info
 
 
