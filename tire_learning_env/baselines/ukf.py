@@ -47,7 +47,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..observer._kernel import CH_E1, CH_E2, N_CHANNELS
-from ..observer.model import StateIndex, check_sensor_columns
+from ..observer.model import StateIndex, camera_path_bend, check_sensor_columns
 from ..observer.trace import EstimateTrace
 from ..params import CameraParams, ParameterError, TireParams, VehicleParams
 from ._ukf_kernels import (N_ERR, N_SIGMA, N_X, STATE_NAMES, PARAM_NAMES, U_AX, U_DELTA, U_PDD, U_PDDD, U_VX, UKF_FAMILY,  # noqa: F401
@@ -330,7 +330,7 @@ class JointUKF:
         if math.isfinite(z1) and math.isfinite(z2):
             xc = float(self.vehicle.camera_x)
             if xc:  # the path's bend over camera_x, at the curvature of the last predict (psi_dot_des / vx)
-                z1 += 0.5 * self._u[U_PDD] / self._u[U_VX] * xc * xc
+                z1 += float(camera_path_bend(self._u[U_PDD] / self._u[U_VX], xc))
             ukf_update(self.x_, self.P_, z1, z2, self.measurement_std[0] ** 2, self.measurement_std[1] ** 2, xc)
         self._u[U_DELTA] = float(delta)
         self._u[U_VX] = self.vehicle.vx if vx is None else float(vx)
@@ -391,7 +391,7 @@ class JointUKF:
             pdd, pddd = vx * kappa, ax * kappa + vx * kappa_rate
         xc = float(self.vehicle.camera_x)
         if xc:  # e1 measured camera_x ahead of the CG: the path's bend over camera_x back onto it (ukf_update)
-            e1 = e1 + 0.5 * kappa * xc * xc
+            e1 = e1 + camera_path_bend(kappa, xc)
         t0 = time.perf_counter()
         out_x, out_pd, out_c12, aux = np.empty((n, N_X)), np.empty((n, N_X)), np.empty(n), np.empty((n, 4))
         out_nu, out_nis = np.full((n, 2), np.nan), np.full(n, np.nan)

@@ -49,7 +49,7 @@ from .calibration import NOISE_DEFAULT, NOISE_FLOOR, _noise, sample_period
 from .config import ObserverConfig
 from .gains import synthesize_gains
 from .latency import _estimate_latency, _profile_window  # noqa: F401  (_profile_window: re-exported)
-from .model import MeasurementModel, StateIndex, measurement_model
+from .model import MeasurementModel, StateIndex, camera_path_bend, measurement_model
 from .neuro_adaptive import HealthParams, NeuroAdaptiveObserver
 from .offline import FORCE_ERROR_STAGES, hold_fit, refine
 from .prior_length import select_prior_length
@@ -397,7 +397,7 @@ def _estimate_once(
         # a camera camera_x ahead of the CG sees e1 + camera_x sin(e2) - kappa camera_x^2 / 2: the passes measure the
         # first two terms (_kernel_update._measurement); the path's own bend over camera_x (kappa is known) goes back
         # onto the logged e1 here
-        rows["e1"] = rows["e1"] + 0.5 * np.nan_to_num(rows["kappa"]) * vehicle.camera_x**2
+        rows["e1"] = rows["e1"] + camera_path_bend(rows["kappa"], vehicle.camera_x)
     reexpressed = None
     if model.uses_camera and config.lane_reexpressions:  # a lane change steps e1 by a lane width: a shift, not motion
         rows["e1"], reexpressed = lane_reexpressions(t, rows["e1"], rows["e2"], rows["vx"])

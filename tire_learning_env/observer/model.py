@@ -48,6 +48,7 @@ __all__ = [
     "slip_jacobian",
     "to_error_state",
     "from_error_state",
+    "camera_path_bend",
 ]
 
 
@@ -157,6 +158,16 @@ def linear_matrices(vehicle: VehicleParams, vx: float, k_f: float, k_r: float, n
     F[0] = 1.0 / m
     F[1] = (lf / Iz, -lr / Iz)
     return A, F
+
+
+def camera_path_bend(kappa: ArrayLike, camera_x: float) -> NDArray:
+    """``kappa camera_x^2 / 2`` [m]: how far the path bends away from its tangent over ``camera_x``.
+
+    A lane camera ``camera_x`` [m] ahead of the CG (:attr:`.VehicleParams.camera_x`) sees
+    ``e1 + camera_x sin(e2) - kappa camera_x^2 / 2``. The estimators measure the first two terms
+    and add this one back onto the logged ``e1`` (``kappa`` is known; NaN curvature counts as 0).
+    """
+    return 0.5 * np.nan_to_num(np.asarray(kappa, dtype=float)) * (camera_x * camera_x)
 
 
 def slip_jacobian(vehicle: VehicleParams, vx: float, nx: int = 4) -> NDArray:
