@@ -969,19 +969,19 @@ def test_an_axle_left_at_its_weight_bound_is_not_identified_and_the_reason_named
 
 
 def _lane_change_log_with_camera_ahead(camera_x: float, seed: int = 0):
-    """45 s of repeated lane changes (sedan, linear truth tire, 20 Hz camera of 1 cm / 0.3 deg, 50 ms late) whose
-    ``e1`` is the offset of a point ``camera_x`` ahead of the CG: ``e1 + camera_x sin(e2) - kappa camera_x^2 / 2``."""
-    from tire_learning_env.roads import LaneChangeRoad
+    """``bench_camera_position.camera_ahead_log``: 45 s of lane changes whose ``e1`` is measured ``camera_x`` ahead
+    of the CG (the README's camera-position figures), imported, not copied."""
+    import sys
+    from pathlib import Path
 
-    vx = 20.0
-    road = LaneChangeRoad.repeated(first=2 * vx, spacing=6 * vx, change_length=2.6 * vx, count=8)
-    cam = CameraParams(rate=20.0, latency=0.05, noise="gaussian", e1_noise=0.01, e2_noise=math.radians(0.3))
-    log = simulate(road, 45.0, camera=cam, seed=seed, speed_profile=lambda t: (vx, 0.0), tire_model="linear")
-    s = {k: np.array(v, dtype=float) for k, v in log.sensors.items()}
-    frames = np.isfinite(s["e1"])
-    e2_true = np.asarray(log.truth["true_state"])[frames, 2]
-    s["e1"][frames] += camera_x * np.sin(e2_true) - 0.5 * s["kappa"][frames] * camera_x**2
-    return s, log.vehicle
+    bench = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    sys.path.insert(0, bench)
+    try:
+        from bench_camera_position import camera_ahead_log
+
+        return camera_ahead_log(camera_x, seed)
+    finally:
+        sys.path.remove(bench)
 
 
 @pytest.mark.slow

@@ -169,8 +169,8 @@ class VehicleParams(_Params):
         ``e1 + x sin(e2) - kappa x^2 / 2`` from the path (the last term: the path's own bend over
         ``x``), and :func:`tire_learning_env.observer.estimate` measures that. ``e2`` is the same
         anywhere on the car. Default 0: ``e1`` is the CG's. The log cannot show it: a camera 1.5 m
-        ahead read as the CG's made a 45 s lane-change log not identifiable (bands of +/-18 / 34 %
-        against +/-2.4 / 3.3 % when the camera is where the model says).
+        ahead read as the CG's made a 45 s lane-change log not identifiable (bands of +/-22 / 36 %
+        against +/-2.4 / 3.1 % with ``camera_x`` given: ``benchmarks/bench_camera_position.py``).
     """
 
     m: float = 1529.95  # [kg]
