@@ -69,9 +69,13 @@ def time_env_steps(env, action, seconds: float, warmup: int = 20) -> tuple[int, 
     return n, time.perf_counter() - t0
 
 
-def emit(result: dict) -> None:
-    """Print the result as JSON with the machine it ran on."""
+def emit(result: dict, path: str | None = None) -> None:
+    """Print the result as JSON with the machine it ran on; with ``path``, also write it there atomically."""
     result["machine"] = {"python": sys.version.split()[0], "platform": platform.platform(), "cpu_count": os.cpu_count()}
+    if path:
+        from tire_learning_env.io import atomic_write_json
+
+        atomic_write_json(path, result)
     print(json.dumps(result, indent=2))
 
 

@@ -76,11 +76,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--out", default=None, help="also write the JSON here (atomically)")
     args = ap.parse_args(argv)
     out = {"benchmark": "camera_position", "cases": {name: run_case(x_log, x_file) for name, x_log, x_file in CASES}}
-    if args.out:
-        from tire_learning_env.io import atomic_write_json
-
-        atomic_write_json(args.out, out)
-    emit(out)
+    emit(out, args.out)
     return out
 
 

@@ -138,11 +138,7 @@ def main(argv: list[str] | None = None) -> dict:
         "open_loop": {c: summarise([r for r in rows if r["config"] == c and r["open_loop"]]) for c in names},
         "drives": rows,
     }  # fmt: skip
-    if args.out:
-        from tire_learning_env.io import atomic_write_json
-
-        atomic_write_json(args.out, out)
-    emit(out)
+    emit(out, args.out)
     return out
 
 
