@@ -3,7 +3,8 @@
 The drive: 45 s of repeated lane changes at 20 m/s. The package's sedan has a linear truth tire. The camera
 runs at 20 Hz, with gaussian noise of 1 cm / 0.3 deg, 50 ms late. The vehicle file is +10 / -8 % off. The
 logged ``e1`` is that of a point ``camera_x`` ahead of the CG, ``e1 + camera_x sin(e2) - kappa camera_x^2 / 2``
-(:func:`camera_ahead_log`; the simulator's own camera sits at the CG, so the frames are moved after the drive).
+(:func:`camera_ahead_log`: the simulator's camera sits where the truth vehicle's ``camera_x`` puts it, and the
+lane-keeping driver steers on what it shows).
 
 Three cases:
 - the camera at the CG;
@@ -39,14 +40,13 @@ def camera_ahead_log(camera_x: float, seed: int = 0):
     from tire_learning_env.roads import LaneChangeRoad
     from tire_learning_env.simulation import simulate
 
+    from tire_learning_env.params import VehicleParams
+
     road = LaneChangeRoad.repeated(first=2 * VX, spacing=6 * VX, change_length=2.6 * VX, count=8)
     cam = CameraParams(rate=20.0, latency=0.05, noise="gaussian", e1_noise=E1_NOISE, e2_noise=E2_NOISE)
-    log = simulate(road, DURATION, camera=cam, seed=seed, speed_profile=lambda t: (VX, 0.0), tire_model="linear")
-    s = {k: np.array(v, dtype=float) for k, v in log.sensors.items()}
-    frames = np.isfinite(s["e1"])
-    e2_true = np.asarray(log.truth["true_state"])[frames, 2]
-    s["e1"][frames] += camera_x * np.sin(e2_true) - 0.5 * s["kappa"][frames] * camera_x**2
-    return s, log.vehicle
+    log = simulate(road, DURATION, vehicle=VehicleParams(camera_x=camera_x), camera=cam, seed=seed,
+                   speed_profile=lambda t: (VX, 0.0), tire_model="linear")  # fmt: skip
+    return {k: np.array(v, dtype=float) for k, v in log.sensors.items()}, log.vehicle
 
 
 def run_case(log_camera_x: float, file_camera_x: float) -> dict:

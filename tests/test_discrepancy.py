@@ -428,11 +428,24 @@ def test_config_rejects_unknown_keys():
     assert math.isclose(DiscrepancyConfig().window, 3.0)
 
 
-def test_a_camera_ahead_of_the_cg_is_refused_by_name_not_reported_as_an_effect(tmp_path):
-    """The workflow's model reads e1 at the CG. A vehicle file whose camera sits ahead (camera_x, which the estimate
-    command takes) is refused naming it; analysed as the CG's, the position would come out as a missing effect."""
-    from tire_learning_env.params import ParameterError, VehicleParams
+def test_a_camera_ahead_of_the_cg_is_part_of_the_model_not_a_missing_effect(tmp_path):
+    """A camera 1.5 m ahead (the simulator's, from the vehicle's camera_x): with camera_x in the vehicle file the
+    clean log has no discrepancy and a hidden latency is named and sized; read as the CG's, the camera's position
+    is itself what the comparison finds."""
+    from tire_learning_env.params import VehicleParams
 
-    log = _log(tmp_path, {}, duration=20.0)
-    with pytest.raises(ParameterError, match=r"camera_x.*\+1\.5 m|\+1\.5 m.*camera_x"):
-        analyze(log, vehicle=VehicleParams(camera_x=1.5), progress=False)
+    ahead = VehicleParams(camera_x=1.5)
+
+    def log_ahead(effects, name):
+        path = tmp_path / name
+        write_log(path, simulate_hidden(effects, "identification", 30.0, camera_rate=50.0, seed=1, vehicle=ahead))
+        return read_log(path)
+
+    clean = log_ahead({}, "clean.csv")
+    told = analyze(clean, vehicle=ahead, progress=False)
+    assert told.verdict == "none", (told.verdict, [e["name"] for e in told.effects])
+    at_cg = analyze(clean, vehicle=VehicleParams(), progress=False)
+    assert at_cg.verdict != "none"
+    late = analyze(log_ahead({"camera_latency": 0.05}, "late.csv"), vehicle=ahead, progress=False)
+    assert [e["name"] for e in late.effects] == ["camera_latency"], late.verdict
+    assert late.effects[0]["parameters"]["latency"] == pytest.approx(0.05, rel=0.2)

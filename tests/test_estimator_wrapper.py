@@ -97,3 +97,23 @@ def test_fused_mode_without_imu_samples_keeps_correcting_with_the_camera():
     err = np.degrees(np.array([np.abs(i["estimate"]["slip"] - i["true_slip"]) for i in infos[50:]]))
     assert np.all(np.isfinite(err)) and err.max() < 0.1, err.max()
     assert infos[-1]["estimate"]["health"] in HEALTH_NAMES
+
+
+def test_the_wrapper_estimates_the_cgs_offset_from_a_camera_ahead_of_it():
+    """An env whose vehicle has its camera 1.5 m ahead (``camera_x``): the camera shows that point's offset, and the
+    wrapper's causal estimate of the CG's ``e1`` matches the truth as with a camera at the CG. On this 300 m curve
+    the path's bend over 1.5 m is 3.75 mm; left out of the measurement, it gave an error of 2.6 mm RMS."""
+    from tire_learning_env.dynamics import StateIndex
+    from tire_learning_env.params import VehicleParams
+
+    x = 1.5
+    env = EstimatorWrapper(gym.make(ENV_ID, vehicle=VehicleParams(camera_x=x)))
+    infos = _rollout(env, 300)
+    err, shown = [], []
+    for info in infos:
+        err.append(info["estimate"]["state"][StateIndex.E1] - info["truth_log"]["true_state"][-1, StateIndex.E1])
+        frames = np.isfinite(info["sensor_log"]["e1"])
+        shown.append(np.abs(info["sensor_log"]["e1"][frames] - info["truth_log"]["true_state"][frames, StateIndex.E1]))
+    rms = float(np.sqrt(np.mean(np.square(err[100:]))))
+    assert rms < 5e-4, rms  # m
+    assert np.concatenate(shown).max() > 1e-3  # the frames are not the CG's offset

@@ -30,3 +30,26 @@ def test_uniform_noise_has_the_configured_width():
     err = err[~np.isnan(err)]
     assert np.abs(err).max() <= 0.01
     assert np.std(err) == pytest.approx(0.01 / np.sqrt(3), rel=0.1)
+
+
+@pytest.mark.parametrize("speed_profile", [None, lambda t: (25.0 + 0.1 * t, 0.1)], ids=["compiled loop", "python loop"])
+def test_a_camera_ahead_of_the_cg_shows_the_offset_of_its_own_point(speed_profile):
+    """``VehicleParams.camera_x``: the simulator's camera measures ``e1 + x sin(e2) - kappa x^2 / 2`` of the state
+    it shows (the point x ahead, minus the path's own bend over x); ``e2`` is the car's. The driver steers on it."""
+    from tire_learning_env.params import VehicleParams
+
+    camera = CameraParams(rate=20.0, latency=0.1)
+    x = 1.5
+    log = simulate("sine", 10.0, vehicle=VehicleParams(camera_x=x), camera=camera, seed=1, speed_profile=speed_profile)
+    e1, e2 = log.sensors["e1"], log.sensors["e2"]
+    idx = np.flatnonzero(np.isfinite(e1))
+    shown = idx - 100  # 0.1 s earlier at 1 kHz
+    state = log.truth["true_state"][shown]
+    kappa = log.sensors["kappa"][shown]
+    expected = state[:, StateIndex.E1] + x * np.sin(state[:, StateIndex.E2]) - 0.5 * kappa * x * x
+    np.testing.assert_allclose(e1[idx], expected, atol=1e-12)
+    np.testing.assert_allclose(e2[idx], state[:, StateIndex.E2], atol=1e-12)
+    assert np.max(np.abs(e1[idx] - state[:, StateIndex.E1])) > 1e-3  # not the CG's offset
+    assert np.max(np.abs(kappa)) > 0 and np.max(np.abs(state[:, StateIndex.E2])) > 1e-4  # both terms exercised
+    at_cg = simulate("sine", 10.0, camera=camera, seed=1, speed_profile=speed_profile)
+    assert not np.allclose(at_cg.sensors["delta"], log.sensors["delta"])  # the driver saw the camera's e1

@@ -35,7 +35,7 @@ from numba import njit
 S_E1, S_E1_DOT, S_E2, S_E2_DOT, S_LAG_F, S_LAG_R = range(6)
 N_PLANT_STATE = 6
 # vehicle vector
-V_M, V_IZ, V_LF, V_LR, V_CF, V_CR, V_HCG, V_TRACK, V_FZF, V_FZR = range(10)
+V_M, V_IZ, V_LF, V_LR, V_CF, V_CR, V_HCG, V_TRACK, V_FZF, V_FZR, V_CAMERA_X = range(11)
 N_VEHICLE = 10
 # tire vector: kind and coefficients (linear: k; pacejka: B, C, D, E; table: a_min, a_step)
 TIRE_LINEAR, TIRE_PACEJKA, TIRE_TABLE = 0.0, 1.0, 2.0
@@ -53,7 +53,7 @@ N_TIRE = 5
 ) = range(8)
 N_EFFECTS = 8
 # camera parameter vector and state vector
-CAM_RATE, CAM_LATENCY, CAM_E1_BIAS, CAM_E2_BIAS = range(4)
+CAM_RATE, CAM_LATENCY, CAM_E1_BIAS, CAM_E2_BIAS, CAM_X = range(5)
 CAMS_NEXT, CAMS_LATEST_E1, CAMS_LATEST_E2, CAMS_LATEST_TIME = range(4)
 # camera queue of taken frames, a row each: delivery time, time taken [s], e1 [m], e2 [rad] (NaN: dropped)
 PEND_DUE, PEND_TAKEN, PEND_E1, PEND_E2 = range(4)
@@ -212,14 +212,17 @@ def road_lookup(s, kappa, dkappa, ds):
 
 
 @njit(cache=True)
-def camera_tick(t, e1, e2, cam, cstate, counters, pending, noise, drop):
-    """Advance the camera to time ``t`` with true errors ``e1``, ``e2``.
+def camera_tick(t, e1, e2, kappa, cam, cstate, counters, pending, noise, drop):
+    """Advance the camera to time ``t`` with true errors ``e1``, ``e2`` of the CG on a path of curvature ``kappa``.
 
     Takes a frame when one is due (noise ``noise[counters[CAMC_NOISE]]``, dropped if
-    ``drop[...]``), queues it for delivery ``latency`` later, and delivers what is due.
+    ``drop[...]``), queues it for delivery ``latency`` later, and delivers what is due. A camera
+    ``x = cam[CAM_X]`` ahead of the CG (``VehicleParams.camera_x``) shows ``e1 + x sin(e2) - kappa x^2 / 2``.
     Returns ``(delivered, e1_frame, e2_frame)``; a dropped frame is delivered as NaN.
     """
     if t >= cstate[CAMS_NEXT] - _EPS:
+        if cam[CAM_X] != 0.0:
+            e1 = e1 + cam[CAM_X] * math.sin(e2) - 0.5 * kappa * cam[CAM_X] * cam[CAM_X]
         i = counters[CAMC_NOISE]
         counters[CAMC_NOISE] = i + 1
         cap = pending.shape[0]
@@ -557,7 +560,7 @@ def advance_ticks(
             k2, dk2 = road_lookup(s_end, curve_a, curve_b, curve_ds)
         else:
             k0, dk0, k1, dk1, k2, dk2 = _knot_lookups(s, s_mid, s_end, curve_a, curve_b)
-        delivered, f1, f2 = camera_tick(t, state[S_E1], state[S_E2], cam, cstate, counters, pending, noise, drop)
+        delivered, f1, f2 = camera_tick(t, state[S_E1], state[S_E2], k0, cam, cstate, counters, pending, noise, drop)
         delta_prev = delta
         if steering != steering:
             kp = k0

@@ -225,8 +225,9 @@ def vehicle_vector(vehicle: VehicleParams) -> NDArray:
     """The vehicle as the compiled kernels' parameter vector (``_kernels.V_*`` layout)."""
     fzf, fzr = vehicle.static_axle_loads
     return np.array(
-        [vehicle.m, vehicle.Iz, vehicle.lf, vehicle.lr, vehicle.Cf, vehicle.Cr, vehicle.h_cg, vehicle.track, fzf, fzr]
-    )
+        [vehicle.m, vehicle.Iz, vehicle.lf, vehicle.lr, vehicle.Cf, vehicle.Cr, vehicle.h_cg, vehicle.track, fzf, fzr,
+         vehicle.camera_x]
+    )  # fmt: skip
 
 
 def effects_vector(effects: PlantEffects) -> NDArray:

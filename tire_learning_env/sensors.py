@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from ._kernels import CAMC_NOISE, CAMS_LATEST_E1, CAMS_LATEST_E2, CAMS_LATEST_TIME, camera_tick
-from .params import CameraParams
+from .params import CameraParams, ParameterError
 
 __all__ = ["Camera"]
 
@@ -35,12 +35,19 @@ class Camera:
         Rate, latency, noise, bias and dropout.
     physics_dt : float
         Simulation step [s]; frames and deliveries happen on these ticks.
+    camera_x : float
+        Where the camera measures ``e1``, ahead of the centre of gravity [m]
+        (:attr:`~tire_learning_env.params.VehicleParams.camera_x`; the simulators pass the
+        plant's). Default 0: the CG's ``e1``.
     """
 
-    def __init__(self, params: CameraParams, physics_dt: float) -> None:
+    def __init__(self, params: CameraParams, physics_dt: float, camera_x: float = 0.0) -> None:
         self.params = params
         self.dt = float(physics_dt)
-        self.param_vec = np.array([params.rate, params.latency, params.e1_bias, params.e2_bias])
+        self.camera_x = float(camera_x)
+        if not math.isfinite(self.camera_x):
+            raise ParameterError(f"camera_x must be finite [m], got {camera_x!r}")
+        self.param_vec = np.array([params.rate, params.latency, params.e1_bias, params.e2_bias, self.camera_x])
         capacity = int(math.ceil(params.latency * params.rate)) + 4
         self.pending = np.zeros((capacity, 4))
         self.reset(np.random.default_rng(0))
@@ -77,8 +84,9 @@ class Camera:
         :meth:`ensure_noise`: it may replace the noise arrays)."""
         return self.param_vec, self.state, self.counters, self.pending, self.noise, self.drop
 
-    def tick(self, t: float, e1: float, e2: float) -> tuple[float, float] | None:
-        """Advance to time ``t`` [s] where the true errors are ``e1`` [m], ``e2`` [rad].
+    def tick(self, t: float, e1: float, e2: float, kappa: float = 0.0) -> tuple[float, float] | None:
+        """Advance to time ``t`` [s] where the CG's true errors are ``e1`` [m], ``e2`` [rad] on a path of
+        curvature ``kappa`` [1/m] (it matters only for a camera ahead of the CG, ``camera_x``).
 
         Returns
         -------
@@ -86,7 +94,7 @@ class Camera:
             The frame delivered at this tick (NaN values for a dropped frame), or ``None``.
         """
         self.ensure_noise(1)
-        delivered, d1, d2 = camera_tick(t, e1, e2, *self.kernel_args())
+        delivered, d1, d2 = camera_tick(t, e1, e2, kappa, *self.kernel_args())
         return (d1, d2) if delivered else None
 
     @property

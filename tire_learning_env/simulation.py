@@ -190,7 +190,7 @@ class Simulator:
         self.road = road
         self.table = RoadTable(road)
         self.dt = float(physics_dt)
-        self.camera = Camera(camera, self.dt)
+        self.camera = Camera(camera, self.dt, camera_x=plant.vehicle.camera_x)
         self.driver = LaneKeepingDriver(driver, driver_vehicle or plant.vehicle)
         self.speed_profile = speed_profile
         self._vx0 = (float(plant.vehicle.vx), 0.0)
@@ -386,7 +386,7 @@ def advance_ticks_python(
         s_end = s + 0.5 * dt * (vx + vx_end)
         k2, dk2 = curvature(s_end)
         state = plant.state
-        frame = camera.tick(t, state[StateIndex.E1], state[StateIndex.E2])
+        frame = camera.tick(t, state[StateIndex.E1], state[StateIndex.E2], k0)
         delta_prev = delta
         if steering != steering:
             e1m, e2m = camera.latest

@@ -28,7 +28,7 @@ from numba import njit, prange
 
 from .. import _kernels
 from .._jit_cache import key_on_family
-from .._kernels import V_HCG, V_IZ, V_LF, V_LR, V_M, V_TRACK, bicycle_slip_angles, tire_force
+from .._kernels import V_CAMERA_X, V_HCG, V_IZ, V_LF, V_LR, V_M, V_TRACK, bicycle_slip_angles, tire_force
 
 # theta layout: one entry per physical parameter of the effect library
 (
@@ -373,14 +373,17 @@ def _hermite(t0, t1, y0, y1, d0, d1, tq):
 
 
 @njit(cache=True, nogil=True)
-def predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, out):
+def predict_measurements(traj, j0, t, th, veh, meas_row, meas_chan, m0, m1, out):
     """Model predictions of measurements ``m0..m1-1`` into ``out[0..m1-m0-1]``.
 
     ``traj`` is a trajectory (:func:`simulate_rows`) starting at row ``j0``.
     Camera channels are read at ``t - latency`` (cubic Hermite between rows, using the
-    state derivatives); ``e2`` gets the heading bias. IMU channels are read at ``t``.
+    state derivatives); ``e2`` gets the heading bias. A camera ``veh[V_CAMERA_X]`` ahead of
+    the CG sees ``e1 + x sin(e2)`` (the path's own bend over ``x`` is added onto the logged
+    ``e1`` by :func:`.data.prepare`). IMU channels are read at ``t``.
     """
     tau = th[TH_LATENCY]
+    xc = veh[V_CAMERA_X]
     n = traj.shape[0]
     # the heading-bias drift is measured about the middle of the log's time span, t_mid
     t_mid = 0.5 * (t[0] + t[t.shape[0] - 1])
@@ -408,11 +411,16 @@ def predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, out):
             if ch == CH_E1:
                 y0, y1, d0, d1 = traj[kk, OUT_E1], traj[kk + 1, OUT_E1], traj[kk, OUT_E1D], traj[kk + 1, OUT_E1D]
                 val = _hermite(ta, tb, y0, y1, d0, d1, tq)
+                if xc != 0.0:
+                    y0, y1, d0, d1 = traj[kk, OUT_E2], traj[kk + 1, OUT_E2], traj[kk, OUT_E2D], traj[kk + 1, OUT_E2D]
+                    val += xc * math.sin(_hermite(ta, tb, y0, y1, d0, d1, tq))
             else:
                 y0, y1, d0, d1 = traj[kk, OUT_E2], traj[kk + 1, OUT_E2], traj[kk, OUT_E2D], traj[kk + 1, OUT_E2D]
                 val = _hermite(ta, tb, y0, y1, d0, d1, tq)
         else:
             val = traj[k, OUT_E1] if ch == CH_E1 else traj[k, OUT_E2]
+            if ch == CH_E1 and xc != 0.0:
+                val += xc * math.sin(traj[k, OUT_E2])
         if ch == CH_E2:
             val += th[TH_E2_BIAS] + th[TH_E2_DRIFT] * (t[j] - t_mid)
         out[o] = val
@@ -450,7 +458,7 @@ def window_residuals(
         far = True
         for it in range(n_iter + 1):
             good = simulate_rows(x, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, traj)
-            predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, base)
+            predict_measurements(traj, j0, t, th, veh, meas_row, meas_chan, m0, m1, base)
             if not good:
                 ok = False
                 break
@@ -466,7 +474,7 @@ def window_residuals(
                     xp = x.copy()
                     xp[q] += fd[q]
                     simulate_rows(xp, j0, j1, t, delta, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, traj)
-                    predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, pert)
+                    predict_measurements(traj, j0, t, th, veh, meas_row, meas_chan, m0, m1, pert)
                     fd_column(jac, q, meas_w, pert, base, m0, m1, fd[q])
             dx = gauss_newton_step(jac, meas_val, meas_w, base, m0, m1, 4)
             if mode == 2 and step_is_small(dx, tol):
@@ -505,14 +513,14 @@ def steering_sensitivity(
         dl = delta.copy()
         xw = x0[w].copy()
         simulate_rows(xw, j0, j1, t, dl, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, traj)
-        predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, base)
+        predict_measurements(traj, j0, t, th, veh, meas_row, meas_chan, m0, m1, base)
         for b in range(blk_ptr[w], blk_ptr[w + 1]):
             ra = blk_rows[b, BLK_FIRST]
             rb = blk_rows[b, BLK_STOP]
             for j in range(ra, rb):
                 dl[j] += h
             simulate_rows(xw, j0, j1, t, dl, dslope, vx, pdd, veh, tf, tr, tabf, tabr, th, h_max, traj)
-            predict_measurements(traj, j0, t, th, meas_row, meas_chan, m0, m1, pert)
+            predict_measurements(traj, j0, t, th, veh, meas_row, meas_chan, m0, m1, pert)
             for j in range(ra, rb):
                 dl[j] = delta[j]
             fd_column(out, b - blk_ptr[w], meas_w, pert, base, m0, m1, h)

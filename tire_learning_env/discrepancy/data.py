@@ -298,8 +298,13 @@ def _measurements(
     return sigma, sigma_est, meas_row, meas_chan, meas_val, meas_w, ptr
 
 
-def prepare(log: DrivingLog, config: DiscrepancyConfig | None = None) -> ModelData:
+def prepare(log: DrivingLog, config: DiscrepancyConfig | None = None, camera_x: float = 0.0) -> ModelData:
     """Arrays of the residual from a camera log, or from an IMU-only log (:func:`prepare_imu`).
+
+    A camera ``camera_x`` [m] ahead of the CG (:attr:`~tire_learning_env.params.VehicleParams.camera_x`) sees
+    ``e1 + camera_x sin(e2) - kappa camera_x^2 / 2``: the path's own bend over ``camera_x`` (``kappa`` is known)
+    is added back onto the logged ``e1`` here, and the model measures the rest
+    (:func:`._model.predict_measurements`), as the estimator does.
 
     Raises
     ------
@@ -323,6 +328,10 @@ def prepare(log: DrivingLog, config: DiscrepancyConfig | None = None) -> ModelDa
     pdd = vx * kappa
     dslope = steering_slope(t, delta, kappa, vx, "curvature" if config.steering == "auto" else config.steering)
     e1 = np.asarray(s["e1"], dtype=float)
+    if camera_x:
+        from ..observer.model import camera_path_bend  # here: the observer package is not imported otherwise
+
+        e1 = e1 + camera_path_bend(kappa, camera_x)
     e2 = np.asarray(s["e2"], dtype=float)
     frames = np.isfinite(e1) & np.isfinite(e2)
     min_frames = 50

@@ -90,13 +90,6 @@ def analyze(
     if tire not in TIRE_CHOICES:
         raise ParameterError(f"tire must be one of {TIRE_CHOICES}, got {tire!r}")
     notes: list[str] = []
-    if log.kind != "imu" and vehicle.camera_x:
-        raise ParameterError(
-            f"the vehicle file puts the lane camera {vehicle.camera_x:+g} m ahead of the CG (camera_x), but the "
-            "discrepancy workflow's model reads e1 at the CG and has no camera position yet: its answer would name the "
-            "camera's position as a missing effect. The estimate command takes camera_x; here, left out, the "
-            "camera's position is itself what the comparison finds"
-        )
     if log.kind == "imu":
         from ..imu import clean_imu_log
 
@@ -104,7 +97,7 @@ def analyze(
         # without rows) is no error: the windows below split at it as they do for a camera log
         log, cleaning = clean_imu_log(log, vehicle, allow_gaps=True)
         notes += [f"IMU log cleaning: {n}" for n in cleaning.notes()]
-    data = prepare(log, config)
+    data = prepare(log, config, camera_x=vehicle.camera_x)  # a camera ahead of the CG: its e1 is measured there
     library = library_for(data.kind)
     if candidates is not None:
         unknown = sorted(set(candidates) - {c.name for c in library})

@@ -159,7 +159,7 @@ class TrafficEnv(EgoDecisions, TireLearningEnv):
 
         self._init_plant(args, plant_factory, plant_sampler)
         self._compiled = hasattr(self.plant, "kernel_params")
-        self.camera = Camera(self.camera_params, self.dt)
+        self.camera = Camera(self.camera_params, self.dt, camera_x=self.vehicle.camera_x)
         self.driver = LaneKeepingDriver(self.driver_params, self.vehicle)
 
         self._init_spaces(

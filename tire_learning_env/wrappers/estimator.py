@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 
 from ..metrics import compute_metrics
 from ..observer import ObserverConfig, build_observer
+from ..observer.model import camera_path_bend
 from ..observer.trace import EstimateTrace
 from ..params import ParameterError
 from ..simulation import SENSOR_KEYS
@@ -132,6 +133,7 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             inputs["vehicle"], inputs["camera"], self.config, inputs["physics_dt"], initial_weights=initial_weights,
             sensors=sensors, imu_period=inputs["physics_dt"] if uses_imu else None,
         )  # fmt: skip
+        self._camera_x = float(inputs["vehicle"].camera_x)
         self._est_high = _IMU_EST_HIGH if sensors == "imu" else _EST_HIGH
         self.append_to_observation = append_to_observation
         self.keep_history = keep_history
@@ -163,6 +165,10 @@ class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             raise KeyError(f"{self.env} gives no info['sensor_log'] (the per-tick sensor rows the observer needs); "
                            "wrap an env that passes it on")  # fmt: skip
         sensors = {k: info["sensor_log"][k] for k in SENSOR_KEYS}
+        if self._camera_x and self.sensors != "imu":
+            # a camera camera_x ahead of the CG: the observer measures e1 + camera_x sin(e2); the path's own bend over
+            # camera_x goes back onto the logged e1, as estimate() does (observer.model.camera_path_bend)
+            sensors["e1"] = np.asarray(sensors["e1"], dtype=float) + camera_path_bend(sensors["kappa"], self._camera_x)
         trace = self.observer.run(sensors)
         if self.keep_history:
             self._traces.append(trace)
