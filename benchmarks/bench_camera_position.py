@@ -36,11 +36,9 @@ CASES = (("camera at the CG", 0.0, 0.0), ("1.5 m ahead, camera_x 0", 1.5, 0.0), 
 
 def camera_ahead_log(camera_x: float, seed: int = 0):
     """``(sensors, truth_vehicle)``: the drive above with ``e1`` measured ``camera_x`` [m] ahead of the CG."""
-    from tire_learning_env.params import CameraParams
+    from tire_learning_env.params import CameraParams, VehicleParams
     from tire_learning_env.roads import LaneChangeRoad
     from tire_learning_env.simulation import simulate
-
-    from tire_learning_env.params import VehicleParams
 
     road = LaneChangeRoad.repeated(first=2 * VX, spacing=6 * VX, change_length=2.6 * VX, count=8)
     cam = CameraParams(rate=20.0, latency=0.05, noise="gaussian", e1_noise=E1_NOISE, e2_noise=E2_NOISE)

@@ -36,7 +36,7 @@ S_E1, S_E1_DOT, S_E2, S_E2_DOT, S_LAG_F, S_LAG_R = range(6)
 N_PLANT_STATE = 6
 # vehicle vector
 V_M, V_IZ, V_LF, V_LR, V_CF, V_CR, V_HCG, V_TRACK, V_FZF, V_FZR, V_CAMERA_X = range(11)
-N_VEHICLE = 10
+N_VEHICLE = 11
 # tire vector: kind and coefficients (linear: k; pacejka: B, C, D, E; table: a_min, a_step)
 TIRE_LINEAR, TIRE_PACEJKA, TIRE_TABLE = 0.0, 1.0, 2.0
 N_TIRE = 5
