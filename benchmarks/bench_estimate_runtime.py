@@ -53,8 +53,9 @@ def _make_log(name: str):
 def _bands(res) -> float:
     """Wall time [s] of the curve bands ``tire-learning estimate`` computes from the result after the estimate
     (the learned slip range, the curve file's 161-point grid and the plot's band on every 4th point of its 401-point
-    grid, per axle: Newey-West sandwiches of 926 directions over the log's scores; 1526 before the plot drew its band
-    through 101 points)."""
+    grid, per axle: Newey-West sandwiches of 926 directions over the log's scores, 1526 before the plot drew its band
+    through 101 points; since 2026-12-08 a quadratic form each in the scores' long-run covariance where the bandwidth
+    is found within a few lags, :class:`~tire_learning_env.observer.longrun.ScoreLongRun`, else two FFTs each)."""
     import math
 
     import numpy as np

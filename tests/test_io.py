@@ -270,3 +270,21 @@ def test_a_camera_log_whose_imu_columns_say_vx_is_in_kmh_is_warned(tmp_path):
     with pytest.warns(UserWarning, match=r"ay = 0.2\d+ x vx\*yaw_rate .*'vx' looks like km/h .*it does use vx"):
         read = read_log(tmp_path / "kmh.csv")
     assert read.kind == "camera" and any("looks like km/h" in n for n in read.notes)
+
+
+@pytest.mark.parametrize("rows", [0, 1, 8191, 8193, 20000])
+def test_a_table_is_written_cell_by_cell_as_defined(tmp_path, rows):
+    """:func:`write_table` formats its rows a block at a time: the file is the definition's (``%.10g`` per cell, an
+    empty cell for NaN, infinities as ``inf``), NaN cells next to each other, at line starts and ends included."""
+    from tire_learning_env.io import write_table
+
+    rng = np.random.default_rng(rows)
+    cols = {f"c{i}": rng.standard_normal(rows) * 10.0 ** rng.integers(-9, 9, rows) for i in range(5)}
+    for name in ("c0", "c1", "c4"):
+        cols[name][rng.random(rows) < 0.4] = np.nan
+    if rows:
+        cols["c2"][: min(rows, 4)] = [np.inf, -np.inf, -0.0, 1e300][: min(rows, 4)]
+    write_table(tmp_path / "t.csv", cols)
+    table = np.column_stack(list(cols.values())) if rows else np.empty((0, 5))
+    body = "\n".join(",".join("" if v != v else "%.10g" % v for v in row) for row in table)
+    assert (tmp_path / "t.csv").read_text() == ",".join(cols) + "\n" + body + "\n"

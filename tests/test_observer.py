@@ -850,6 +850,52 @@ def test_offline_variance_is_the_same_for_one_direction_or_a_grid_of_them(monkey
     np.testing.assert_allclose(grid, np.maximum(model - data_part, 0.0) + np.maximum(ref, data_part), rtol=1e-10)
 
 
+@pytest.mark.parametrize("frame_every, corr", [(1, 0.0), (5, 0.5), (1, 0.8)])
+def test_the_long_run_covariance_gives_each_direction_the_definitions_variance(frame_every, corr):
+    """:class:`~tire_learning_env.observer.longrun.ScoreLongRun`: a grid of directions' variances as quadratic
+    forms of the scores' long-run covariance equal the definition (every lag's autocovariance by a direct sum,
+    the same bandwidth rule) to rounding: scores on every row or on every 5th (a 20 Hz camera on 100 Hz rows,
+    whose lag-1 autocorrelation is 0), white or AR(1). A bandwidth the direct lags do not reach is ``None``."""
+    from tire_learning_env.observer.longrun import ScoreLongRun
+
+    rng = np.random.default_rng(frame_every)
+    n, nw, d = 6000, 7, 40
+    e = rng.standard_normal((n, nw))
+    for k in range(1, n):
+        e[k] += corr * e[k - 1]
+    scores = (e @ rng.standard_normal((nw, nw)) + 0.3).astype(np.float32)
+    scores[np.arange(n) % frame_every != 0] = 0.0
+    C = rng.standard_normal((nw, d))
+    ref = _newey_west_reference(scores.astype(float) @ C)
+    lr = ScoreLongRun(scores)
+    np.testing.assert_allclose(lr.variance(C), ref, rtol=1e-9)
+    np.testing.assert_allclose(lr.variance(C[:, :3], max_lag=11), _newey_west_reference(scores.astype(float) @ C[:, :3], 11),
+                               rtol=1e-9)  # fmt: skip
+    slow = np.cumsum(rng.standard_normal((n, nw)), axis=0).astype(np.float32)  # a random walk: correlated far out
+    assert ScoreLongRun(slow).variance(C) is None
+
+
+def test_a_fit_gives_a_grid_of_directions_the_same_band_as_each_direction_alone():
+    """:meth:`OfflineFit.variance` of more than ``GRID_DIRECTIONS`` directions (a curve's band, through the
+    long-run covariance) equals each direction's own FFT variance, given the bandwidth the grid chose."""
+    from tire_learning_env.observer import offline as O
+    from tire_learning_env.observer.longrun import ScoreLongRun
+
+    rng = np.random.default_rng(7)
+    n, nw = 8000, 6
+    scores = rng.standard_normal((n, nw)).astype(np.float32)
+    scores[np.arange(n) % 4 != 0] = 0.0
+    B = rng.standard_normal((nw, nw))
+    A = B @ B.T + nw * np.eye(nw)
+    fit = O.OfflineFit(np.zeros(nw), A, 0.1 * np.eye(nw), np.linalg.inv(A), None, [], 0, n, scores=scores)
+    g = rng.standard_normal((3 * O.GRID_DIRECTIONS, nw))
+    C = np.linalg.solve(A, g.T)
+    L = ScoreLongRun(scores).bandwidth(C)
+    assert L is not None
+    one_by_one = np.array([O.newey_west_variance(scores.astype(float) @ C[:, [j]], max_lag=L)[0] for j in range(len(g))])
+    np.testing.assert_allclose(fit._sandwich(C), one_by_one, rtol=1e-9)
+
+
 # ---- a pause in the log: a segment boundary ------------------------------------------------------
 def test_nothing_is_predicted_or_fitted_across_a_pause(lane_log):
     """A logger pause (5 s without rows) is a segment boundary: with the weights held, the rows after it

@@ -160,8 +160,8 @@ def plot_tire_curves(
             ax.plot(grid * _DEG, f, style, lw=1.3, label=label)
             if bands and label in bands:
                 # the band on every 4th point, drawn through the rest: a band is a long-run variance per
-                # direction (an FFT of the log's scores each), smooth in slip, and 802 directions were 3 s
-                # of the estimate command on a 30 min log
+                # direction, smooth in slip; where the scores stay correlated beyond the lags ScoreLongRun
+                # computes directly (a noise-free 1 kHz camera) each direction is an FFT of the log's scores
                 coarse = grid[::4]
                 sd = np.interp(grid, coarse, bands[label](coarse, axle))
                 ax.fill_between(grid * _DEG, f - 2 * sd, f + 2 * sd, color=style[0], alpha=0.2, lw=0,

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .box_step import _solve_step  # noqa: F401  (re-exported: prior_length and tests use it here)
-from .longrun import NW_KEPT_LAGS, _newey_west_columns, newey_west_variance, nw_columns_per_fft  # noqa: F401  (re-exported)
+from .longrun import NW_KEPT_LAGS, ScoreLongRun, _newey_west_columns, newey_west_variance, nw_columns_per_fft  # noqa: F401  (re-exported)
 from .neuro_adaptive import NeuroAdaptiveObserver, axle_index
 from .passes import _nis_per_dof, _pass, innovation_whiteness, pass_pieces, pass_threads  # noqa: F401  (re-exported)
 from .readout import curve_gradient, stiffness_gradient, stiffness_readout
@@ -56,6 +56,12 @@ FORCE_ERROR_STAGES = (3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4)
 #: alternatives (:meth:`OfflineFit.prior_sensitivity` adds them to the bands; a refit carries them over).
 ALTERNATIVES = ("prior_alternatives", "hold_alternatives", "dynamics_alternatives", "mismatch_alternatives",
                 "delay_alternatives", "latency_alternatives", "process_noise_alternatives")
+
+
+#: More directions than this in one variance call (a curve's band, a slip grid) go through
+#: :class:`.longrun.ScoreLongRun` (one long-run covariance matrix per fit and bandwidth); fewer (the
+#: stiffness) through the FFTs of each direction's own series, as always.
+GRID_DIRECTIONS = 8
 
 
 @dataclass
@@ -111,6 +117,13 @@ class OfflineFit:
     def _sandwich(self, Ainv_g: NDArray) -> NDArray:
         """Newey-West long-run variance of the scores projected on the columns of ``Ainv_g`` (nw, n)."""
         scores = self.scores
+        if Ainv_g.shape[1] > GRID_DIRECTIONS:  # a grid (a curve's band): the quadratic form of the long-run covariance
+            key = ("long_run", id(scores))
+            if key not in self._sandwich_cache:
+                self._sandwich_cache[key] = ScoreLongRun(scores)
+            out = self._sandwich_cache[key].variance(Ainv_g)
+            if out is not None:
+                return out
         many = Ainv_g.shape[1] > nw_columns_per_fft(scores.shape[0])
         scores64 = np.ascontiguousarray(scores.T, dtype=float) if many else None  # once for many directions (a grid)
 
