@@ -2,7 +2,7 @@
 
 The estimator ramps the steering between rows when it is smooth at the row rate, or rough only by sensor
 noise on a continuous wheel, and otherwise (camera logs with frames on fewer than 60 % of the rows) reports
-the midpoint of the two holds (``observer.rows.steering_character``; README "Logs of another generator").
+the midpoint of the two holds (``observer.rows.steering_character``; `docs/results.md` "Logs of another generator").
 This script lists, without running any estimator, each drive's ``roughness``, ``half_power_share``, share of
 rows with a camera frame and the rule's verdict, for
 
@@ -19,8 +19,8 @@ A change of the rule's thresholds shows here which drives it moves. Run:
 minutes); JSON on stdout and written atomically to ``benchmarks/results/steering_census.json`` (``--out``).
 
 ``--estimate`` also runs the estimator, with default settings and a vehicle file 8 / 6 % off the generator's
-true tire stiffness, on the noisy-steering logs of :data:`ESTIMATE_CASES` (the README's "Logs of another
-generator" figures), each twice: with the rule as it is, and with the sensor-noise test switched off
+true tire stiffness, on the noisy-steering logs of :data:`ESTIMATE_CASES` (the "Logs of another
+generator" figures of `docs/results.md`), each twice: with the rule as it is, and with the sensor-noise test switched off
 (``before``: the rule before it, which reports rough steering at the midpoint of the two holds). Per case the
 stiffness error against the truth [%], the two-sigma band [% of the truth], whether the truth is inside it, the
 verdict and the steering reported between rows (``ramp``, ``hold`` or ``midpoint``; about 2 minutes more;

@@ -298,7 +298,7 @@ def test_the_steering_census_tells_the_package_s_steps_from_a_noisy_sensor(tmp_p
     and one seed of noisy-sensor variants: the package's drives step the steering at the frames (rough, half the
     changes' power on under 2 % of the rows: the midpoint), the independent generator's steering is smooth, and
     its noisy variants are rough by sensor noise (ramped). The full census (70 package drives, 12 sweep cases,
-    40 variants) is in the README."""
+    40 variants) is in `docs/results.md`."""
     out = tmp_path / "census.json"
     sys.path.insert(0, str(BENCH.parent))  # the census imports its sibling benchmarks as it runs
     try:
@@ -319,7 +319,7 @@ def test_the_steering_census_tells_the_package_s_steps_from_a_noisy_sensor(tmp_p
 
 
 def test_the_census_s_estimates_compare_the_rule_with_and_without_its_sensor_noise_test():
-    """``bench_steering_census.estimate_case`` (the ``--estimate`` rows behind the README's noisy-steering figures):
+    """``bench_steering_census.estimate_case`` (the ``--estimate`` rows behind the noisy-steering figures of ``docs/results.md``):
     the generator's sedan, seed 0, 0.005 deg of steering noise. With the rule as it is the steering counts as a
     continuous wheel seen through a noisy sensor and is ramped; without the sensor-noise test (the rule before it)
     it is reported at the midpoint, further from the truth (measured +0.11 / -0.02 % against +1.22 / +1.62 %)."""

@@ -478,7 +478,7 @@ def test_steering_half_power_share_tells_sensor_noise_from_steps():
 def _independent_sedan_log(seed, noise_deg=0.0, step_deg=0.0):
     """The independent generator of ``benchmarks/independent_logs/camera_sweep`` (no import of this package):
     its sedan, 60 s; the sensors, the true tire stiffness and a vehicle file 8 % / 6 % off it. The recipe is
-    ``bench_steering_census.sedan_log``'s (the README's noisy-steering figures), imported, not copied."""
+    ``bench_steering_census.sedan_log``'s (the noisy-steering figures of ``docs/results.md``), imported, not copied."""
     import sys
     from pathlib import Path
 

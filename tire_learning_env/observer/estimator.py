@@ -473,7 +473,7 @@ def _estimate_once(
         # come from a drive faster than its frames, so the ramp is kept (sensitivity.steering_hold_sensitivity)
         # -- unless the logged steering is smooth at the row rate (rows.steering_roughness, whose constant says what
         # was measured): then the line between the rows is the signal's reconstruction, not one of two guesses, and
-        # the ramp is reported (the hold's answer stays in the band; README "Logs of another generator")
+        # the ramp is reported (the hold's answer stays in the band; `docs/results.md` "Logs of another generator")
         # -- or when its roughness is sensor noise on a continuous wheel (rows.steering_half_power_share: it
         # changes at every row, where steps change at few)
         character = steering_character(rows["t"], rows["delta"])
