@@ -69,6 +69,26 @@ def time_env_steps(env, action, seconds: float, warmup: int = 20) -> tuple[int, 
     return n, time.perf_counter() - t0
 
 
+def chosen(parser, text: str, known, what: str) -> list[str]:
+    """The comma-separated names of ``text``, each one of ``known``; an unknown one is ``parser``'s error naming it
+    (``what``: the plural noun, e.g. ``"variant(s)"``)."""
+    names = [c for c in text.split(",") if c]
+    unknown = [c for c in names if c not in known]
+    if unknown:
+        parser.error(f"unknown {what} {unknown}; choose from {list(known)}")
+    return names
+
+
+def map_jobs(fn: Callable, jobs: list, workers: int, desc: str) -> list:
+    """``fn`` over ``jobs`` in ``workers`` processes, in order, with a progress bar on stderr."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from tqdm import tqdm
+
+    with ProcessPoolExecutor(workers) as pool:
+        return list(tqdm(pool.map(fn, jobs), total=len(jobs), desc=desc, file=sys.stderr))
+
+
 def emit(result: dict, path: str | None = None) -> None:
     """Print the result as JSON with the machine it ran on; with ``path``, also write it there atomically."""
     result["machine"] = {"python": sys.version.split()[0], "platform": platform.platform(), "cpu_count": os.cpu_count()}

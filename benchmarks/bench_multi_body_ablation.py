@@ -27,10 +27,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
-from concurrent.futures import ProcessPoolExecutor
 
-from _bench_common import emit
+from _bench_common import chosen, emit, map_jobs
 
 import numpy as np  # noqa: E402
 
@@ -104,15 +102,9 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated, of " + ", ".join(VARIANTS))
     ap.add_argument("--out", default=None, help="also write the JSON here (atomically)")
     args = ap.parse_args(argv)
-    names = [v for v in args.variants.split(",") if v]
-    unknown = [v for v in names if v not in VARIANTS]
-    if unknown:
-        ap.error(f"unknown variant(s) {unknown}; choose from {list(VARIANTS)}")
+    names = chosen(ap, args.variants, VARIANTS, "variant(s)")
     jobs = [(i, v, args.seed) for v in names for i in range(args.n)]
-    from tqdm import tqdm
-
-    with ProcessPoolExecutor(args.workers) as pool:
-        rows = list(tqdm(pool.map(run, jobs), total=len(jobs), desc="multi-body ablation", file=sys.stderr))
+    rows = map_jobs(run, jobs, args.workers, "multi-body ablation")
     out = {"benchmark": "multi_body_ablation", "seed": args.seed, "n": args.n, "variants": {v: VARIANTS[v] for v in names},
            "summary": {v: summarise([r for r in rows if r["variant"] == v]) for v in names}, "drives": rows}  # fmt: skip
     emit(out, args.out)

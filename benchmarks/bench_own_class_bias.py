@@ -36,13 +36,8 @@ Run: ``python benchmarks/bench_own_class_bias.py [--seeds 8] [--workers 2] [--ou
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import json
-import os
-import sys
-from concurrent.futures import ProcessPoolExecutor
 
-from _bench_common import emit
+from _bench_common import chosen, emit, map_jobs
 
 import numpy as np  # noqa: E402
 
@@ -120,15 +115,9 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--configs", default=",".join(CONFIGS), help="comma-separated, of " + ", ".join(CONFIGS))
     ap.add_argument("--out", default=None, help="also write the JSON here (atomically)")
     args = ap.parse_args(argv)
-    names = [c for c in args.configs.split(",") if c]
-    unknown = [c for c in names if c not in CONFIGS]
-    if unknown:
-        ap.error(f"unknown configuration(s) {unknown}; choose from {list(CONFIGS)}")
+    names = chosen(ap, args.configs, CONFIGS, "configuration(s)")
     jobs = [(s, ol, c) for ol in (False, True) for c in names for s in range(args.seeds)]
-    from tqdm import tqdm
-
-    with ProcessPoolExecutor(args.workers) as pool:
-        rows = list(tqdm(pool.map(one, jobs), total=len(jobs), desc="own-class drives", file=sys.stderr))
+    rows = map_jobs(one, jobs, args.workers, "own-class drives")
     out = {
         "benchmark": "own_class_bias",
         "drive": {"vx_mps": VX, "duration_s": DURATION, "road": "LaneChangeRoad.repeated(2 vx, 6 vx, 2.6 vx)",
