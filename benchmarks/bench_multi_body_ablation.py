@@ -16,7 +16,8 @@ effective stiffness of the plant as modified, which the scoring recomputes):
 - ``no_camber_thrust_no_relaxation``: that and no tire relaxation.
 
 Per variant: the observer's and the UKF's signed and absolute stiffness errors (median, p90, mean per axle), the
-observer's band coverage, verdicts and model-error flags. If relaxation or roll camber made the low reading,
+observer's band coverage, verdicts and model-error flags; and per CommonRoad vehicle the tire's own stiffness and the
+effective one (``stiffness_references``: how much the roll's camber thrust adds on steady circles). If relaxation or roll camber made the low reading,
 removing it would shrink the error.
 
 Run: ``python benchmarks/bench_multi_body_ablation.py [--n 10] [--workers 2] [--variants ...] [--out FILE]``
@@ -26,12 +27,14 @@ Run: ``python benchmarks/bench_multi_body_ablation.py [--n 10] [--workers 2] [--
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 
 from _bench_common import chosen, emit, map_jobs
 
 import numpy as np  # noqa: E402
 
+#: Keyword arguments of :func:`modified_plant` per variant.
 VARIANTS = {
     "as_drawn": {"relaxation_length": None, "roll_camber": True},
     "no_relaxation": {"relaxation_length": 0.0, "roll_camber": True},
@@ -42,36 +45,74 @@ VARIANTS = {
 }
 
 
-def run(job: tuple) -> dict:
-    """One scenario under one variant: ``bench_generalization.run_scenario`` on the modified plant."""
-    i, name, seed = job
-    import bench_generalization as bg
+@contextlib.contextmanager
+def modified_plant(relaxation_length: float | None = None, roll_camber: bool = True, camber_thrust: bool = True):
+    """Every :class:`~tire_learning_env.high_order.MultiBodyPlant` built inside is modified: tire relaxation length
+    [m] (``None``: as configured), the suspension's roll camber ``D``, ``E`` (``False``: 0) and the tire's camber
+    thrust ``p_hy3``, ``p_vy3`` (``False``: 0). The class is restored on exit."""
     import tire_learning_env.high_order.plant as hp
     from tire_learning_env.high_order.params import HighOrderConfig
 
-    spec = VARIANTS[name]
     original = hp.MultiBodyPlant.__init__
 
     def init(self, road, params=None, **kw):
-        if spec["relaxation_length"] is not None:
-            kw.setdefault("config", HighOrderConfig(relaxation_length=spec["relaxation_length"]))
-        if not spec["roll_camber"] and params is not None:
-            params = dataclasses.replace(params, D_f=0.0, D_r=0.0, E_f=0.0, E_r=0.0)
-        if not spec.get("camber_thrust", True) and params is not None:
-            params = dataclasses.replace(params, tire=dataclasses.replace(params.tire, p_hy3=0.0, p_vy3=0.0))
+        if relaxation_length is not None:
+            kw.setdefault("config", HighOrderConfig(relaxation_length=relaxation_length))
+        if params is not None:
+            params = _modified_params(params, roll_camber, camber_thrust)
         original(self, road, params=params, **kw)
 
     hp.MultiBodyPlant.__init__ = init
     try:
-        r = bg.run_scenario(bg.sample_scenario("multi_body", i, seed, False))
+        yield
     finally:
         hp.MultiBodyPlant.__init__ = original
+
+
+def _modified_params(params, roll_camber: bool, camber_thrust: bool):
+    if not roll_camber:
+        params = dataclasses.replace(params, D_f=0.0, D_r=0.0, E_f=0.0, E_r=0.0)
+    if not camber_thrust:
+        params = dataclasses.replace(params, tire=dataclasses.replace(params.tire, p_hy3=0.0, p_vy3=0.0))
+    return params
+
+
+def run(job: tuple) -> dict:
+    """One scenario under one variant: ``bench_generalization.run_scenario`` on the modified plant."""
+    i, name, seed = job
+    import bench_generalization as bg
+
+    sc = bg.sample_scenario("multi_body", i, seed, False)
+    with modified_plant(**VARIANTS[name]):
+        r = bg.run_scenario(sc)
     o, u = r.get("observer") or {}, r.get("ukf") or {}
-    return {"scenario": i, "variant": name, "valid": bool((r.get("truth_summary") or {}).get("valid", False)),
+    return {"scenario": i, "variant": name, "vehicle": sc["vehicle"],
+            "valid": bool((r.get("truth_summary") or {}).get("valid", False)),
             "true_stiffness_N_per_rad": r.get("true_stiffness_N_per_rad"),
             "observer_error_pct": o.get("stiffness_error_pct"), "observer_covered": o.get("covered_2sigma"),
             "observer_verdict": o.get("verdict"), "model_error_detected": o.get("model_error_detected"),
             "ukf_error_pct": u.get("stiffness_error_pct"), "error": r.get("error")}  # fmt: skip
+
+
+def stiffness_references(name: str) -> dict:
+    """Per CommonRoad vehicle of the family under variant ``name``: the tire's own per-tire stiffness at static load
+    and the effective (steady-circle) one the family is scored against [N/rad]."""
+    from tire_learning_env.high_order import MultiBodyParams
+    from tire_learning_env.high_order.params import HighOrderConfig
+    from tire_learning_env.high_order.plant import true_cornering_stiffness
+    from tire_learning_env.high_order.simulate import effective_cornering_stiffness
+
+    spec = VARIANTS[name]
+    out = {}
+    for vehicle in (1, 2):
+        p = _modified_params(MultiBodyParams.from_commonroad(vehicle), spec.get("roll_camber", True),
+                             spec.get("camber_thrust", True))  # fmt: skip
+        config = None if spec["relaxation_length"] is None else HighOrderConfig(relaxation_length=spec["relaxation_length"])
+        tire, eff = true_cornering_stiffness(p), effective_cornering_stiffness(p, config)
+        out[f"commonroad_{vehicle}"] = {"tire_N_per_rad": [round(float(x)) for x in tire],
+                                        "effective_N_per_rad": [round(float(x)) for x in eff],
+                                        "effective_over_tire_pct": [round(100.0 * (e / t - 1.0), 2) for e, t in zip(eff, tire)]}  # fmt: skip
+    return out
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -106,7 +147,8 @@ def main(argv: list[str] | None = None) -> dict:
     jobs = [(i, v, args.seed) for v in names for i in range(args.n)]
     rows = map_jobs(run, jobs, args.workers, "multi-body ablation")
     out = {"benchmark": "multi_body_ablation", "seed": args.seed, "n": args.n, "variants": {v: VARIANTS[v] for v in names},
-           "summary": {v: summarise([r for r in rows if r["variant"] == v]) for v in names}, "drives": rows}  # fmt: skip
+           "summary": {v: summarise([r for r in rows if r["variant"] == v]) for v in names},
+           "stiffness_references": {v: stiffness_references(v) for v in names}, "drives": rows}  # fmt: skip
     emit(out, args.out)
     return out
 

@@ -29,23 +29,13 @@ AXLES = ("front", "rear")
 
 def truth_slope(i: int, noise_scale: float = 1.0, relaxation_length: float | None = None) -> list[float]:
     """Truth force-slip slope per tire against the effective stiffness [%]."""
-    import tire_learning_env.high_order.plant as hp
-    from tire_learning_env.high_order.params import HighOrderConfig
+    from bench_multi_body_ablation import modified_plant
 
     sc = bg.sample_scenario("multi_body", i, 15, False)
     sc["camera"]["e1_noise"] *= noise_scale
     sc["camera"]["e2_noise"] *= noise_scale
-    original = hp.MultiBodyPlant.__init__
-    if relaxation_length is not None:
-        def init(self, *a, **k):
-            k.setdefault("config", HighOrderConfig(relaxation_length=relaxation_length))
-            original(self, *a, **k)
-
-        hp.MultiBodyPlant.__init__ = init
-    try:
+    with modified_plant(relaxation_length=relaxation_length):
         log, _, _, _, _, k_true = bg.build(sc)
-    finally:
-        hp.MultiBodyPlant.__init__ = original
     a, f = np.asarray(log.truth["true_slip"]), np.asarray(log.truth["true_force"])
     ok = np.all(np.isfinite(a), 1) & (np.asarray(log.sensors["t"]) > 3.0)
     out = []

@@ -30,7 +30,7 @@ def write_table(path: str | Path, columns: Mapping[str, NDArray]) -> Path:
     row_format = ",".join(["%.10g"] * len(names))
 
     def write(fh) -> None:
-        fh.write(",".join(names) + "\n" + ("" if table.shape[0] else "\n"))
+        fh.write(",".join(names) + "\n" + ("" if table.shape[0] else "\n"))  # no rows: an empty body line, as always
         for r0 in range(0, table.shape[0], _TABLE_BLOCK_ROWS):
             block = table[r0 : r0 + _TABLE_BLOCK_ROWS]
             text = "\n".join([row_format % tuple(row) for row in block.tolist()])

@@ -127,8 +127,8 @@ def bartlett_bandwidth(n: int, first_lag: int | None) -> int:
     return int(min(max(4 * first, 4 * n ** (2.0 / 9.0)), n // 4))
 
 
-#: Lags :class:`ScoreLongRun` computes one by one while it looks for the bandwidth; a direction set whose
-#: autocorrelation is still above its noise level there goes to the FFTs of :func:`_newey_west_columns`.
+#: Lags :class:`ScoreLongRun` computes directly (in doubling batches) while it looks for the bandwidth; a direction
+#: set whose autocorrelation is still above its noise level there goes to the FFTs of :func:`_newey_west_columns`.
 DIRECT_BANDWIDTH_LAGS = 32
 
 #: Rows of the scores :class:`ScoreLongRun` converts to float64 at a time.
